@@ -1,0 +1,32 @@
+# Everything runs inside .venv so a fresh machine needs only python3.
+# TORCH_INSTALL installs PyTorch before the package; the default is the CPU
+# build this project is tested with. For a GPU, pass the pip command for the
+# CUDA build that matches your driver (see README).
+PYTHON ?= python3
+VENV ?= .venv
+TORCH_INSTALL ?= pip install torch==2.13.0
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: install demo test benchmarks clean
+
+$(STAMP): setup.py
+	$(PYTHON) -m venv $(VENV)
+	. $(BIN)/activate && $(TORCH_INSTALL)
+	$(BIN)/pip install -e ".[test]"
+	$(BIN)/python -c "import torch, tg_intrinsic; print('torch', torch.__version__, '| tg_intrinsic', tg_intrinsic.__version__)"
+	touch $(STAMP)
+
+install: $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/python -m tg_intrinsic.demo
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q tests
+
+benchmarks: $(STAMP)
+	for script in benchmarks/*.py; do $(BIN)/python $$script || exit 1; done
+
+clean:
+	rm -rf $(VENV) build *.egg-info data

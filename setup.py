@@ -1,0 +1,38 @@
+from setuptools import find_packages, setup
+
+# torch is listed without a pin so that users keep the build (CPU or CUDA) they
+# installed first; the Makefile installs the CPU build torch==2.13.0 before this.
+install_requires = [
+    'torch>=2.4',
+    'torch-geometric>=2.8,<2.9',
+    'numpy>=1.24',
+    'scipy>=1.10',
+    'trimesh>=4.0',
+    'numba>=0.59',
+    'tqdm>=4.60',
+    'matplotlib>=3.7',
+]
+
+extras_require = {
+    'test': [
+        'pytest>=7',
+        'hypothesis>=6.80',
+        'robust-laplacian>=0.2.7',
+    ],
+    # Optional compiled scatter kernels; results must not change with it.
+    'scatter': ['torch-scatter'],
+}
+
+setup(
+    name='tg_intrinsic',
+    version='0.1.0',
+    description=('PyTorch Geometric extension for learning and computing on '
+                 'curved surfaces with intrinsic geometry'),
+    long_description=open('README.md', encoding='utf-8').read(),
+    long_description_content_type='text/markdown',
+    python_requires='>=3.9',
+    packages=find_packages(include=['tg_intrinsic', 'tg_intrinsic.*']),
+    install_requires=install_requires,
+    extras_require=extras_require,
+    license='MIT',
+)

@@ -1,0 +1,153 @@
+"""Input validation shared by the geometry functions.
+
+Every public geometry function calls these before doing any maths, so that
+malformed input fails with a :class:`ValueError` that names the argument, says
+what is wrong and what to do, instead of producing NaNs further down.
+"""
+from typing import Optional
+
+import torch
+from torch import Tensor
+
+FLOAT_DTYPES = (torch.float32, torch.float64)
+
+
+def check_tensor(value, name: str) -> Tensor:
+    if not isinstance(value, Tensor):
+        raise ValueError(f"'{name}' must be a torch.Tensor, got "
+                         f"{type(value).__name__}; convert it with "
+                         f"torch.as_tensor({name})")
+    return value
+
+
+def check_points(pos, name: str = 'pos', dim: Optional[int] = 3,
+                 min_points: int = 1) -> Tensor:
+    """Checks a point array: floating tensor of shape [N, dim], finite."""
+    pos = check_tensor(pos, name)
+    if pos.dim() != 2 or (dim is not None and pos.size(1) != dim):
+        want = f'[N, {dim}]' if dim is not None else '[N, D]'
+        raise ValueError(f"'{name}' must have shape {want}, got "
+                         f"{list(pos.shape)}")
+    if pos.dtype not in FLOAT_DTYPES:
+        raise ValueError(f"'{name}' must be float32 or float64, got "
+                         f"{pos.dtype}; convert it with {name}.float() or "
+                         f"{name}.double()")
+    if pos.size(0) < min_points:
+        raise ValueError(f"'{name}' has {pos.size(0)} points but at least "
+                         f"{min_points} are needed")
+    if pos.numel() > 0 and not bool(torch.isfinite(pos).all()):
+        bad = (~torch.isfinite(pos)).any(dim=1).nonzero().flatten()
+        raise ValueError(f"'{name}' contains NaN or infinite values at "
+                         f"{bad.numel()} row(s) (first: {bad[:5].tolist()}); "
+                         f"remove or repair those points first")
+    return pos
+
+
+def check_vectors(vec, name: str, num: int, like: Tensor) -> Tensor:
+    """Checks a per-point 3-vector array (e.g. normals) against ``like``."""
+    vec = check_points(vec, name)
+    if vec.size(0) != num:
+        raise ValueError(f"'{name}' has {vec.size(0)} rows but there are "
+                         f"{num} points")
+    same_device(vec, name, like)
+    return vec
+
+
+def same_device(value: Tensor, name: str, ref: Tensor, ref_name: str = 'pos'):
+    if value.device != ref.device:
+        raise ValueError(f"'{name}' is on {value.device} but '{ref_name}' is "
+                         f"on {ref.device}; move both to the same device")
+
+
+def check_batch(batch, num_points: int, ref: Tensor) -> Optional[Tensor]:
+    """Checks a PyG batch vector: int64 [N], non-negative, sorted."""
+    if batch is None:
+        return None
+    batch = check_tensor(batch, 'batch')
+    if batch.dim() != 1 or batch.numel() != num_points:
+        raise ValueError(f"'batch' must have shape [{num_points}] (one example "
+                         f"index per point), got {list(batch.shape)}")
+    if batch.dtype != torch.long:
+        raise ValueError(f"'batch' must be torch.long, got {batch.dtype}")
+    same_device(batch, 'batch', ref)
+    if num_points > 0:
+        if int(batch.min()) < 0:
+            raise ValueError("'batch' contains negative example indices")
+        if num_points > 1 and bool((batch[1:] < batch[:-1]).any()):
+            raise ValueError("'batch' must be sorted (points of one example "
+                             "stored contiguously, as PyG's Batch does)")
+    return batch
+
+
+def batch_sizes(batch: Optional[Tensor], num_points: int) -> Tensor:
+    """Number of points per example (including empty examples in between)."""
+    if batch is None:
+        return torch.tensor([num_points], dtype=torch.long)
+    if num_points == 0:
+        return torch.zeros(0, dtype=torch.long)
+    return torch.bincount(batch.cpu())
+
+
+def check_positive_int(value, name: str, minimum: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        if isinstance(value, Tensor) and value.numel() == 1 \
+                and not value.is_floating_point():
+            value = int(value)
+        else:
+            raise ValueError(f"'{name}' must be an integer, got {value!r}")
+    if value < minimum:
+        raise ValueError(f"'{name}' must be at least {minimum}, got {value}")
+    return value
+
+
+def check_positive_float(value, name: str, allow_zero: bool = False) -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"'{name}' must be a number, got {value!r}") from None
+    if value != value or value in (float('inf'), float('-inf')):
+        raise ValueError(f"'{name}' must be finite, got {value}")
+    if value < 0 or (value == 0 and not allow_zero):
+        raise ValueError(f"'{name}' must be positive, got {value}")
+    return value
+
+
+def check_faces(face, num_vertices: int, ref: Tensor, name: str = 'face',
+                allow_degenerate_indices: bool = False) -> Tensor:
+    """Checks a triangle index array in PyG layout ``[3, F]``."""
+    face = check_tensor(face, name)
+    if face.dim() != 2 or face.size(0) != 3:
+        hint = (f' (it looks like [F, 3]; pass {name}.t())'
+                if face.dim() == 2 and face.size(1) == 3 else '')
+        raise ValueError(f"'{name}' must have shape [3, F] (PyG layout), got "
+                         f"{list(face.shape)}{hint}")
+    if face.dtype != torch.long:
+        raise ValueError(f"'{name}' must be torch.long vertex indices, got "
+                         f"{face.dtype}; convert it with {name}.long()")
+    same_device(face, name, ref)
+    if face.numel() > 0:
+        lo, hi = int(face.min()), int(face.max())
+        if lo < 0 or hi >= num_vertices:
+            raise ValueError(f"'{name}' indexes vertices in [{lo}, {hi}] but "
+                             f"there are only {num_vertices} vertices")
+        if not allow_degenerate_indices:
+            repeated = ((face[0] == face[1]) | (face[1] == face[2])
+                        | (face[0] == face[2]))
+            if bool(repeated.any()):
+                bad = repeated.nonzero().flatten()
+                raise ValueError(f"'{name}' has {bad.numel()} triangle(s) "
+                                 f"that repeat a vertex (first: "
+                                 f"{bad[:5].tolist()}); remove them")
+    return face
+
+
+def check_nondegenerate(area: Tensor, scale: Tensor, name: str = 'face'):
+    """Raises if a triangle's area is (numerically) zero."""
+    tol = torch.finfo(area.dtype).eps * 16
+    degenerate = area <= tol * scale.clamp_min(torch.finfo(area.dtype).tiny)
+    if bool(degenerate.any()):
+        bad = degenerate.nonzero().flatten()
+        raise ValueError(f"'{name}' has {bad.numel()} zero-area (degenerate) "
+                         f"triangle(s) (first: {bad[:5].tolist()}); remove "
+                         f"them, e.g. with trimesh's "
+                         f"update_faces(mesh.nondegenerate_faces())")

@@ -1,0 +1,191 @@
+r"""Point-cloud normals and tangent frames."""
+from typing import Optional
+
+import numpy as np
+import scipy.sparse as sp
+import torch
+from numba import njit
+from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
+from torch import Tensor
+
+from ._checks import (check_batch, check_points, check_positive_int,
+                      check_vectors)
+from .neighbors import knn
+
+
+def estimate_normals(pos: Tensor, k: int = 10,
+                     batch: Optional[Tensor] = None,
+                     orient: bool = True) -> Tensor:
+    r"""Estimates unit normals of a point cloud by local PCA (Hoppe et al.,
+    1992): the normal of point :math:`i` is the eigenvector of the smallest
+    eigenvalue of the covariance of :math:`i` and its :math:`k` nearest
+    neighbours :math:`\mathcal{N}(i)`,
+
+    .. math::
+        C_i = \frac{1}{k + 1} \sum_{j \in \{i\} \cup \mathcal{N}(i)}
+        (p_j - \bar{p}_i)(p_j - \bar{p}_i)^\top .
+
+    With :obj:`orient=True` the signs are made consistent by propagating
+    along a minimum spanning tree of the k-nn graph with edge cost
+    :math:`1 - |n_i^\top n_j|`, starting in every connected component from
+    the point farthest from the component's centroid, where the normal is
+    parallel to the offset from the centroid and is turned outwards. This does
+    not assume that the shape is centred at the origin.
+
+    Args:
+        pos (torch.Tensor): Point positions.
+        k (int, optional): Number of neighbours (at least 2).
+            (default: :obj:`10`)
+        batch (torch.Tensor, optional): Example index of every point; the
+            neighbourhoods never cross examples. (default: :obj:`None`)
+        orient (bool, optional): Orient the normals consistently.
+            (default: :obj:`True`)
+
+    Shapes:
+        - **input:** pos :math:`(N, 3)`, batch :math:`(N)`
+        - **output:** :math:`(N, 3)`, unit length
+
+    Raises:
+        ValueError: if a neighbourhood is degenerate (its points coincide or
+            lie on a line), so that no plane can be fitted; remove duplicate
+            points or increase :obj:`k`.
+    """
+    pos = check_points(pos, min_points=1)
+    k = check_positive_int(k, 'k', minimum=2)
+    batch = check_batch(batch, pos.size(0), pos)
+    edge_index = knn(pos, k, batch, loop=False)
+    # knn returns exactly k neighbours per centre, grouped by centre.
+    neighbours = edge_index[0].view(-1, k)
+    pos64 = pos.double()
+    patch = torch.cat([pos64.unsqueeze(1), pos64[neighbours]], dim=1)
+    centred = patch - patch.mean(dim=1, keepdim=True)
+    cov = centred.transpose(1, 2) @ centred / (k + 1)
+    evals, evecs = torch.linalg.eigh(cov)  # ascending eigenvalues
+    tol = 1e3 * torch.finfo(torch.float64).eps
+    degenerate = evals[:, 1] <= tol * evals[:, 2].clamp_min(
+        torch.finfo(torch.float64).tiny)
+    if bool(degenerate.any()):
+        bad = degenerate.nonzero().flatten()
+        raise ValueError(f"the neighbourhoods of {bad.numel()} point(s) "
+                         f"(first: {bad[:5].tolist()}) are degenerate: their "
+                         f"{k + 1} points coincide or lie on a line, so no "
+                         f"tangent plane can be fitted; remove duplicate "
+                         f"points or increase k")
+    normal = evecs[:, :, 0]
+    if orient:
+        normal = _orient(pos64, normal, edge_index)
+    return normal.to(pos.dtype)
+
+
+def _orient(pos: Tensor, normal: Tensor, edge_index: Tensor) -> Tensor:
+    device = normal.device
+    p = pos.cpu().numpy()
+    n = normal.cpu().numpy().copy()
+    num = p.shape[0]
+    src, dst = edge_index.cpu().numpy()
+    # MST ignores explicit zeros, so keep every cost strictly positive.
+    cost = 1.0 - np.abs((n[src] * n[dst]).sum(1)) + 1e-9
+    graph = sp.coo_matrix((cost, (dst, src)), shape=(num, num)).tocsr()
+    graph = graph.maximum(graph.T)
+    tree = minimum_spanning_tree(graph)
+    tree = (tree + tree.T).tocsr()
+    num_comp, label = connected_components(tree, directed=False)
+    count = np.bincount(label, minlength=num_comp).astype(np.float64)
+    centroid = np.stack([np.bincount(label, p[:, d], num_comp)
+                         for d in range(3)], 1) / count[:, None]
+    offset = p - centroid[label]
+    dist = (offset ** 2).sum(1)
+    # Root of each component: the point farthest from its centroid.
+    order = np.lexsort((-dist, label))
+    first = np.searchsorted(label[order], np.arange(num_comp))
+    roots = order[first]
+    outward = (n[roots] * offset[roots]).sum(1)
+    ambiguous = np.abs(outward) <= 1e-3 * np.sqrt(dist[roots])
+    # Flat patches have no outside; pick the sign with a positive dominant
+    # component so that the result is still deterministic.
+    dominant = n[roots, np.abs(n[roots]).argmax(1)]
+    sign = np.where(ambiguous, np.sign(dominant), np.sign(outward))
+    n[roots] *= np.where(sign == 0, 1.0, sign)[:, None]
+    _propagate_signs(tree.indptr, tree.indices, roots.astype(np.int64), n)
+    return torch.from_numpy(n).to(device)
+
+
+@njit(cache=True)
+def _propagate_signs(indptr, indices, roots, normal):
+    num = normal.shape[0]
+    visited = np.zeros(num, dtype=np.bool_)
+    queue = np.empty(num, dtype=np.int64)
+    for root in roots:
+        head = 0
+        tail = 1
+        queue[0] = root
+        visited[root] = True
+        while head < tail:
+            u = queue[head]
+            head += 1
+            for e in range(indptr[u], indptr[u + 1]):
+                v = indices[e]
+                if visited[v]:
+                    continue
+                visited[v] = True
+                dot = (normal[u, 0] * normal[v, 0] + normal[u, 1] * normal[v, 1]
+                       + normal[u, 2] * normal[v, 2])
+                if dot < 0.0:
+                    normal[v, 0] = -normal[v, 0]
+                    normal[v, 1] = -normal[v, 1]
+                    normal[v, 2] = -normal[v, 2]
+                queue[tail] = v
+                tail += 1
+
+
+def tangent_frames(normal: Tensor) -> Tensor:
+    r"""Builds an orthonormal, right-handed tangent frame at every point.
+
+    Row 0 is :math:`e_u`, the unit projection onto the tangent plane of the
+    coordinate axis least aligned with :math:`n`; row 1 is
+    :math:`e_v = n \times e_u`; row 2 is :math:`n`. Hence
+    :math:`e_u \times e_v = n`. A tangent vector with coordinates
+    :math:`(a, b)` is :math:`a e_u + b e_v`. The choice of :math:`e_u` is a
+    gauge: intrinsic operators in this library are independent of it.
+
+    Args:
+        normal (torch.Tensor): Normals (need not be unit length, must not be
+            zero).
+
+    Shapes:
+        - **input:** :math:`(N, 3)`
+        - **output:** :math:`(N, 3, 3)` with rows :math:`(e_u, e_v, n)`
+    """
+    normal = check_points(normal, 'normal', min_points=0)
+    length = normal.norm(dim=-1, keepdim=True)
+    zero = length.squeeze(-1) <= torch.finfo(normal.dtype).tiny
+    if bool(zero.any()):
+        bad = zero.nonzero().flatten()
+        raise ValueError(f"{bad.numel()} normal(s) have zero length (first: "
+                         f"{bad[:5].tolist()}); estimate them first, e.g. "
+                         f"with estimate_normals(pos)")
+    n = normal / length
+    axis = torch.zeros_like(n)
+    axis.scatter_(1, n.abs().argmin(dim=1, keepdim=True), 1.0)
+    e_u = axis - (axis * n).sum(-1, keepdim=True) * n
+    e_u = e_u / e_u.norm(dim=-1, keepdim=True)
+    e_v = torch.linalg.cross(n, e_u)
+    return torch.stack([e_u, e_v, n], dim=1)
+
+
+def check_frames(frame, num: int, like: Tensor) -> Tensor:
+    """Validates user-supplied frames ``[N, 3, 3]`` (rows e_u, e_v, n)."""
+    if not isinstance(frame, Tensor) or frame.dim() != 3 \
+            or tuple(frame.shape[1:]) != (3, 3):
+        raise ValueError("'frame' must be a tensor of shape [N, 3, 3] with "
+                         "rows (e_u, e_v, normal)")
+    check_vectors(frame.reshape(-1, 3), 'frame', 3 * num, like)
+    eye = torch.eye(3, dtype=frame.dtype, device=frame.device)
+    gram = frame @ frame.transpose(1, 2)
+    tol = 1e-4 if frame.dtype == torch.float32 else 1e-8
+    if not bool(((gram - eye).abs() <= tol).all()):
+        raise ValueError("'frame' rows must be orthonormal; build frames "
+                         "with tangent_frames(normal)")
+    if not bool((torch.linalg.det(frame) > 0).all()):
+        raise ValueError("'frame' must be right-handed (e_u x e_v = normal)")
+    return frame

@@ -1,0 +1,1 @@
+"""tg_intrinsic.pool (filled in by later issues)."""

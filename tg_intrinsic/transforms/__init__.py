@@ -1,0 +1,6 @@
+r"""Data transforms: read a :class:`~torch_geometric.data.Data`, call
+:mod:`tg_intrinsic.geometry`, write attributes. Inputs are never mutated."""
+from .estimate_normals import EstimateNormals
+from .tangent_frames import TangentFrames
+
+__all__ = ['EstimateNormals', 'TangentFrames']

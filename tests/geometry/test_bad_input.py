@@ -34,14 +34,21 @@ def point_arrays(draw):
 @st.composite
 def face_arrays(draw, n):
     f = draw(st.sampled_from([0, 1, 4, 20]))
-    hi = max(n, 1) + draw(st.sampled_from([0, 0, 0, 3]))  # past the end
     rng = np.random.default_rng(draw(st.integers(0, 2 ** 16)))
-    face = torch.tensor(rng.integers(-1 if draw(st.booleans()) else 0, hi,
-                                     size=(3, f)))
-    layout = draw(st.sampled_from(['ok', 'ok', 'transposed', 'float']))
-    if layout == 'transposed':
+    m = max(n, 3)
+    # Three distinct corners per triangle (an argsort of random keys).
+    face = torch.tensor(np.argsort(rng.random((f, m)), axis=1)[:, :3].T.copy())
+    defect = draw(st.sampled_from(['none', 'none', 'repeat', 'past_end',
+                                   'negative', 'transposed', 'float']))
+    if f > 0 and defect == 'repeat':
+        face[2, 0] = face[0, 0]
+    elif f > 0 and defect == 'past_end':
+        face[1, 0] = n + 2
+    elif f > 0 and defect == 'negative':
+        face[0, 0] = -1
+    elif defect == 'transposed':
         face = face.t()
-    elif layout == 'float':
+    elif defect == 'float':
         face = face.double()
     return face
 

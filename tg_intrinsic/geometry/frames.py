@@ -27,10 +27,13 @@ def estimate_normals(pos: Tensor, k: int = 10,
 
     With :obj:`orient=True` the signs are made consistent by propagating
     along a minimum spanning tree of the k-nn graph with edge cost
-    :math:`1 - |n_i^\top n_j|`, starting in every connected component from
-    the point farthest from the component's centroid, where the normal is
-    parallel to the offset from the centroid and is turned outwards. This does
-    not assume that the shape is centred at the origin.
+    :math:`(1.05 - |n_i^\top n_j|) \|p_i - p_j\|`; then every connected
+    component is turned outwards so that its flux
+    :math:`\sum_i n_i^\top (p_i - c)` about its own centroid :math:`c` is
+    positive (on a closed surface this is three times the enclosed volume).
+    This does not assume that the shape is centred at the origin. Flat
+    components get the sign that makes the mean normal's largest coordinate
+    positive.
 
     Args:
         pos (torch.Tensor): Point positions.
@@ -83,30 +86,35 @@ def _orient(pos: Tensor, normal: Tensor, edge_index: Tensor) -> Tensor:
     n = normal.cpu().numpy().copy()
     num = p.shape[0]
     src, dst = edge_index.cpu().numpy()
-    # MST ignores explicit zeros, so keep every cost strictly positive.
-    cost = 1.0 - np.abs((n[src] * n[dst]).sum(1)) + 1e-9
+    # Hoppe's cost 1 - |n_i . n_j|, offset and scaled by the edge length so
+    # that the tree prefers short hops and does not jump across thin parts.
+    length = np.sqrt(((p[src] - p[dst]) ** 2).sum(1))
+    cost = (1.0 - np.abs((n[src] * n[dst]).sum(1)) + 0.05) * (
+        length / max(length.mean(), np.finfo(np.float64).tiny) + 1e-9)
     graph = sp.coo_matrix((cost, (dst, src)), shape=(num, num)).tocsr()
     graph = graph.maximum(graph.T)
     tree = minimum_spanning_tree(graph)
     tree = (tree + tree.T).tocsr()
     num_comp, label = connected_components(tree, directed=False)
+    roots = np.unique(label, return_index=True)[1]
+    _propagate_signs(tree.indptr, tree.indices, roots.astype(np.int64), n)
+    # Global sign per component: outward normals have a positive "flux"
+    # sum_i n_i . (p_i - c) (divergence theorem: 3 x volume on closed shapes).
     count = np.bincount(label, minlength=num_comp).astype(np.float64)
     centroid = np.stack([np.bincount(label, p[:, d], num_comp)
                          for d in range(3)], 1) / count[:, None]
     offset = p - centroid[label]
-    dist = (offset ** 2).sum(1)
-    # Root of each component: the point farthest from its centroid.
-    order = np.lexsort((-dist, label))
-    first = np.searchsorted(label[order], np.arange(num_comp))
-    roots = order[first]
-    outward = (n[roots] * offset[roots]).sum(1)
-    ambiguous = np.abs(outward) <= 1e-3 * np.sqrt(dist[roots])
-    # Flat patches have no outside; pick the sign with a positive dominant
-    # component so that the result is still deterministic.
-    dominant = n[roots, np.abs(n[roots]).argmax(1)]
-    sign = np.where(ambiguous, np.sign(dominant), np.sign(outward))
-    n[roots] *= np.where(sign == 0, 1.0, sign)[:, None]
-    _propagate_signs(tree.indptr, tree.indices, roots.astype(np.int64), n)
+    flux = np.bincount(label, (n * offset).sum(1), num_comp)
+    scale = np.bincount(label, np.sqrt((offset ** 2).sum(1)), num_comp)
+    # Flat patches have no outside; make the mean normal's dominant
+    # coordinate positive so that the result is still deterministic.
+    mean = np.stack([np.bincount(label, n[:, d], num_comp)
+                     for d in range(3)], 1)
+    dominant = mean[np.arange(num_comp), np.abs(mean).argmax(1)]
+    flat = np.abs(flux) <= 1e-3 * scale
+    sign = np.where(flat, np.sign(dominant), np.sign(flux))
+    sign[sign == 0] = 1.0
+    n *= sign[label][:, None]
     return torch.from_numpy(n).to(device)
 
 

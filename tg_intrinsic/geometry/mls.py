@@ -19,7 +19,9 @@ PyG batch concatenates the operators.
 """
 from typing import Optional, Tuple
 
+import numpy as np
 import torch
+from numba import njit, prange
 from torch import Tensor
 
 from ._checks import (check_batch, check_points, check_positive_float,
@@ -61,8 +63,8 @@ def check_edge_index(edge_index, num_nodes: int, ref: Tensor) -> Tensor:
 
 def mls_grad_div(pos: Tensor, frame: Tensor, edge_index: Tensor,
                  batch: Optional[Tensor] = None, kernel_width: float = 1.0,
-                 regularizer: float = 1e-3, normalized: bool = True
-                 ) -> Tuple[Tensor, Tensor]:
+                 regularizer: float = 1e-3, normalized: bool = True,
+                 backend: Optional[str] = None) -> Tuple[Tensor, Tensor]:
     r"""Per-edge weights of the MLS gradient :math:`G` and divergence
     :math:`D` (DeltaConv, supplement A).
 
@@ -123,6 +125,9 @@ def mls_grad_div(pos: Tensor, frame: Tensor, edge_index: Tensor,
             (default: :obj:`1e-3`)
         normalized (bool, optional): Normalise by the :math:`\ell_\infty`
             norm of :math:`G`. (default: :obj:`True`)
+        backend (str, optional): ``'numba'`` (a compiled loop over centres,
+            CPU) or ``'torch'`` (vectorised over edges, any device).
+            (default: :obj:`None`: numba on CPU, torch elsewhere)
 
     Returns:
         (grad_weight, div_weight), both :math:`(E, 2)`.
@@ -164,8 +169,78 @@ def mls_grad_div(pos: Tensor, frame: Tensor, edge_index: Tensor,
                          "centre, so no local scale exists; remove duplicate "
                          "points")
     h = (total / count.clamp_min(1)).clamp_min(torch.finfo(pos.dtype).tiny)
-    h_edge = h[edge_batch]
 
+    if backend is None:
+        backend = 'numba' if pos.device.type == 'cpu' else 'torch'
+    if backend == 'numba':
+        grad_weight, div_weight = _mls_numba(pos, frame, edge_index, h,
+                                             batch, kernel_width, regularizer)
+    elif backend == 'torch':
+        grad_weight, div_weight = _mls_torch(pos, frame, edge_index, h,
+                                             batch, kernel_width, regularizer)
+    else:
+        raise ValueError(f"'backend' must be None, 'numba' or 'torch', got "
+                         f"{backend!r}")
+
+    if normalized:
+        row_sums = _scatter_sum(grad_weight.norm(dim=-1), i, n)
+        norm = torch.full((num_examples, ), 0.0, dtype=pos.dtype,
+                          device=pos.device)
+        norm = norm.scatter_reduce(0, batch, row_sums, 'amax')
+        scale = norm.clamp_min(torch.finfo(pos.dtype).tiny)[batch[i]]
+        grad_weight = grad_weight / scale.unsqueeze(-1)
+        div_weight = div_weight / scale.unsqueeze(-1)
+    return grad_weight, div_weight
+
+
+def build_mls_operators(pos: Tensor, k: int = 20,
+                        batch: Optional[Tensor] = None,
+                        normal: Optional[Tensor] = None,
+                        frame: Optional[Tensor] = None,
+                        kernel_width: float = 1.0, regularizer: float = 1e-3,
+                        normalized: bool = True, normal_k: int = 10
+                        ) -> Tuple[Tensor, Tensor, Tensor, Tensor]:
+    r"""Builds everything DeltaConv needs from positions alone: the k-nn
+    graph with self-loops, tangent frames (from :obj:`frame`, else from
+    :obj:`normal`, else from PCA normals of :obj:`normal_k` neighbours) and
+    the MLS weights of :func:`mls_grad_div`. Runs on the device of
+    :obj:`pos`, so a model can rebuild its operators after augmentation.
+
+    Returns:
+        (edge_index, frame, grad_weight, div_weight) with shapes
+        :math:`(2, N k)`, :math:`(N, 3, 3)`, :math:`(N k, 2)`,
+        :math:`(N k, 2)`.
+    """
+    from .frames import check_frames, estimate_normals, tangent_frames
+    from .neighbors import knn
+
+    pos = check_points(pos)
+    if frame is not None:
+        frame = check_frames(frame, pos.size(0), pos)
+    else:
+        if normal is None:
+            normal = estimate_normals(pos, normal_k, batch)
+        else:
+            normal = check_points(normal, 'normal')
+            if normal.shape != pos.shape:
+                raise ValueError(f"'normal' must have shape {list(pos.shape)}"
+                                 f", got {list(normal.shape)}")
+        frame = tangent_frames(normal.to(pos.dtype))
+    # k neighbours including the point itself, which enters its own fit.
+    edge_index = knn(pos, k, batch, loop=True)
+    grad_weight, div_weight = mls_grad_div(
+        pos, frame, edge_index, batch, kernel_width=kernel_width,
+        regularizer=regularizer, normalized=normalized)
+    return edge_index, frame, grad_weight, div_weight
+
+
+def _mls_torch(pos, frame, edge_index, h, batch, kernel_width, regularizer):
+    """Vectorised over edges; the reference for the numba kernel."""
+    n = pos.size(0)
+    j, i = edge_index
+    h_edge = h[batch[i]]
+    diff = pos[j] - pos[i]
+    dist = diff.norm(dim=-1)
     e_u, e_v, normal = frame[:, 0], frame[:, 1], frame[:, 2]
     u = (diff * e_u[i]).sum(-1) / h_edge
     v = (diff * e_v[i]).sum(-1) / h_edge
@@ -204,13 +279,139 @@ def mls_grad_div(pos: Tensor, frame: Tensor, edge_index: Tensor,
                           (gamma_v * e_v[j]).sum(-1)], -1).view(-1, 2, 2)
     to_chart = g_inv @ pushed
     div_weight = (grad_weight.unsqueeze(1) @ to_chart).squeeze(1)
-
-    if normalized:
-        row_sums = _scatter_sum(grad_weight.norm(dim=-1), i, n)
-        norm = torch.full((num_examples, ), 0.0, dtype=pos.dtype,
-                          device=pos.device)
-        norm = norm.scatter_reduce(0, batch, row_sums, 'amax')
-        scale = norm.clamp_min(torch.finfo(pos.dtype).tiny)[edge_batch]
-        grad_weight = grad_weight / scale.unsqueeze(-1)
-        div_weight = div_weight / scale.unsqueeze(-1)
     return grad_weight, div_weight
+
+
+def _mls_numba(pos, frame, edge_index, h, batch, kernel_width, regularizer):
+    """A compiled loop over centres (CPU), parallel across points."""
+    j, i = edge_index
+    order = None
+    if i.numel() > 1 and bool((i[1:] < i[:-1]).any()):
+        order = torch.argsort(i, stable=True)
+        j, i = j[order], i[order]
+    n = pos.size(0)
+    ptr = torch.zeros(n + 1, dtype=torch.long)
+    ptr[1:] = torch.bincount(i.cpu(), minlength=n).cumsum(0)
+    dtype = pos.dtype
+    grad_w, div_w = _mls_kernel(
+        pos.detach().cpu().double().numpy(),
+        frame.detach().cpu().double().numpy(), ptr.numpy(),
+        j.cpu().numpy(), h[batch].cpu().double().numpy(),
+        float(kernel_width), float(regularizer))
+    grad_weight = torch.from_numpy(grad_w).to(dtype)
+    div_weight = torch.from_numpy(div_w).to(dtype)
+    if order is not None:
+        grad_weight = torch.empty_like(grad_weight).index_copy_(
+            0, order, grad_weight)
+        div_weight = torch.empty_like(div_weight).index_copy_(
+            0, order, div_weight)
+    return grad_weight, div_weight
+
+
+@njit(cache=True, parallel=True, fastmath=False)
+def _mls_kernel(pos, frame, ptr, nbr, h_point, kernel_width,
+                regularizer):  # pragma: no cover (numba)
+    num_edges = nbr.shape[0]
+    grad_w = np.zeros((num_edges, 2))
+    div_w = np.zeros((num_edges, 2))
+    sqrt2 = np.sqrt(2.0)
+    for i in prange(pos.shape[0]):
+        lo, hi = ptr[i], ptr[i + 1]
+        k = hi - lo
+        if k == 0:
+            continue
+        h = h_point[i]
+        eu = frame[i, 0]
+        ev = frame[i, 1]
+        nn = frame[i, 2]
+        basis = np.empty((k, 6))
+        wgt = np.empty(k)
+        z = np.empty(k)
+        wsum = 0.0
+        for e in range(k):
+            jj = nbr[lo + e]
+            d0 = pos[jj, 0] - pos[i, 0]
+            d1 = pos[jj, 1] - pos[i, 1]
+            d2 = pos[jj, 2] - pos[i, 2]
+            u = (d0 * eu[0] + d1 * eu[1] + d2 * eu[2]) / h
+            v = (d0 * ev[0] + d1 * ev[1] + d2 * ev[2]) / h
+            z[e] = (d0 * nn[0] + d1 * nn[1] + d2 * nn[2]) / h
+            r2 = (d0 * d0 + d1 * d1 + d2 * d2) / (h * h)
+            wgt[e] = np.exp(-r2 / (kernel_width * kernel_width))
+            wsum += wgt[e]
+            basis[e, 0] = 1.0
+            basis[e, 1] = u
+            basis[e, 2] = v
+            basis[e, 3] = u * u
+            basis[e, 4] = sqrt2 * u * v
+            basis[e, 5] = v * v
+        system = np.zeros((6, 6))
+        for e in range(k):
+            wgt[e] /= wsum
+            for a in range(6):
+                wa = wgt[e] * basis[e, a]
+                for b in range(a, 6):
+                    system[a, b] += wa * basis[e, b]
+        for a in range(1, 6):
+            system[a, a] += regularizer
+        # Cholesky factorisation of the symmetric positive definite system.
+        chol = np.zeros((6, 6))
+        for a in range(6):
+            for b in range(a + 1):
+                acc = system[b, a]
+                for c in range(b):
+                    acc -= chol[a, c] * chol[b, c]
+                if a == b:
+                    chol[a, a] = np.sqrt(acc)
+                else:
+                    chol[a, b] = acc / chol[b, b]
+        fit = np.empty((k, 6))
+        height = np.zeros(6)
+        for e in range(k):
+            y = np.empty(6)
+            for a in range(6):  # forward substitution
+                acc = wgt[e] * basis[e, a]
+                for c in range(a):
+                    acc -= chol[a, c] * y[c]
+                y[a] = acc / chol[a, a]
+            for a in range(5, -1, -1):  # backward substitution
+                acc = y[a]
+                for c in range(a + 1, 6):
+                    acc -= chol[c, a] * fit[e, c]
+                fit[e, a] = acc / chol[a, a]
+            for a in range(6):
+                height[a] += fit[e, a] * z[e]
+        for e in range(k):
+            jj = nbr[lo + e]
+            u = basis[e, 1]
+            v = basis[e, 2]
+            gu = fit[e, 1] / h
+            gv = fit[e, 2] / h
+            zu = height[1] + 2.0 * height[3] * u + sqrt2 * height[4] * v
+            zv = height[2] + sqrt2 * height[4] * u + 2.0 * height[5] * v
+            ej_u = frame[jj, 0]
+            ej_v = frame[jj, 1]
+            t00 = 0.0
+            t01 = 0.0
+            t10 = 0.0
+            t11 = 0.0
+            for c in range(3):
+                gam_u = eu[c] + nn[c] * zu
+                gam_v = ev[c] + nn[c] * zv
+                t00 += gam_u * ej_u[c]
+                t01 += gam_u * ej_v[c]
+                t10 += gam_v * ej_u[c]
+                t11 += gam_v * ej_v[c]
+            det = 1.0 + zu * zu + zv * zv
+            i00 = (1.0 + zv * zv) / det
+            i01 = -zu * zv / det
+            i11 = (1.0 + zu * zu) / det
+            m00 = i00 * t00 + i01 * t10
+            m01 = i00 * t01 + i01 * t11
+            m10 = i01 * t00 + i11 * t10
+            m11 = i01 * t01 + i11 * t11
+            grad_w[lo + e, 0] = gu
+            grad_w[lo + e, 1] = gv
+            div_w[lo + e, 0] = gu * m00 + gv * m10
+            div_w[lo + e, 1] = gu * m01 + gv * m11
+    return grad_w, div_w

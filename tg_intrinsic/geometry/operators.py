@@ -21,10 +21,16 @@ derived operators are
     \operatorname{curl} = -D J, \qquad \Delta = -D G, \qquad
     \Delta_H = -(G D - J G D J).
 """
+import warnings
 from typing import Tuple
 
 import torch
 from torch import Tensor
+
+# CSR matrix products are stable for what is used here (mm with a dense
+# matrix, and its backward); the generic "beta" notice is noise for users.
+warnings.filterwarnings('ignore', message='Sparse CSR tensor support is in '
+                        'beta state')
 
 
 def rotate_j(v: Tensor) -> Tensor:

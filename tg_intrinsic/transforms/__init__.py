@@ -2,5 +2,6 @@ r"""Data transforms: read a :class:`~torch_geometric.data.Data`, call
 :mod:`tg_intrinsic.geometry`, write attributes. Inputs are never mutated."""
 from .estimate_normals import EstimateNormals
 from .tangent_frames import TangentFrames
+from .mls_operators import MLSOperators
 
-__all__ = ['EstimateNormals', 'TangentFrames']
+__all__ = ['EstimateNormals', 'TangentFrames', 'MLSOperators']

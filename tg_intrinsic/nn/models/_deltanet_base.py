@@ -1,0 +1,82 @@
+from typing import List, Optional, Sequence, Tuple
+
+import torch
+from torch import Tensor
+from torch_geometric.data import Data
+
+from tg_intrinsic.geometry.mls import build_mls_operators
+from tg_intrinsic.geometry.operators import SurfaceOperators
+from tg_intrinsic.nn.delta_conv import DeltaConv
+
+
+def operators_of(data: Data, k: int, regularizer: float, kernel_width: float
+                 ) -> Tuple[Tensor, SurfaceOperators]:
+    """The graph and MLS operators of a (batched) ``data``: the ones stored
+    by :class:`~tg_intrinsic.transforms.MLSOperators` when present,
+    otherwise built once here on the data's device."""
+    num_nodes = data.pos.size(0)
+    if getattr(data, 'grad_weight', None) is not None:
+        edge_index = data.edge_index
+        grad_weight, div_weight = data.grad_weight, data.div_weight
+    else:
+        normal = getattr(data, 'normal', None)
+        if normal is None:
+            normal = getattr(data, 'norm', None)
+        edge_index, _, grad_weight, div_weight = build_mls_operators(
+            data.pos, k, getattr(data, 'batch', None), normal=normal,
+            frame=getattr(data, 'frame', None), kernel_width=kernel_width,
+            regularizer=regularizer)
+    return edge_index, SurfaceOperators(edge_index, grad_weight, div_weight,
+                                        num_nodes)
+
+
+class DeltaNetBase(torch.nn.Module):
+    """A stack of :class:`DeltaConv` layers sharing one set of operators
+    (DGCNN layout with a static graph); returns every layer's scalars."""
+    def __init__(self, in_channels: int, conv_channels: Sequence[int],
+                 depth: int = 1, k: int = 20, regularizer: float = 1e-3,
+                 kernel_width: float = 1.0, centralize_first: bool = True,
+                 vector_stream: bool = True):
+        super().__init__()
+        self.in_channels = in_channels
+        self.k = k
+        self.regularizer = regularizer
+        self.kernel_width = kernel_width
+        self.vector_stream = vector_stream
+        channels = [in_channels] + list(conv_channels)
+        self.convs = torch.nn.ModuleList()
+        for layer, (c_in, c_out) in enumerate(zip(channels[:-1],
+                                                  channels[1:])):
+            last = layer == len(channels) - 2
+            self.convs.append(DeltaConv(
+                c_in, c_out, depth=depth,
+                centralized=centralize_first and layer == 0,
+                vector=vector_stream and not last,
+                vector_input=vector_stream))
+
+    def reset_parameters(self):
+        for conv in self.convs:
+            conv.reset_parameters()
+
+    def input_features(self, data: Data) -> Tensor:
+        x = getattr(data, 'x', None)
+        x = data.pos if x is None else x
+        if x.size(-1) != self.in_channels:
+            raise ValueError(f"the model expects {self.in_channels} input "
+                             f"channels but data.x (or data.pos) has "
+                             f"{x.size(-1)}")
+        return x
+
+    def forward(self, data: Data) -> List[Tensor]:
+        x = self.input_features(data)
+        edge_index, operators = operators_of(data, self.k, self.regularizer,
+                                             self.kernel_width)
+        # The vector stream starts as the gradient of the input scalars.
+        v: Optional[Tensor] = operators.grad(x) if self.vector_stream \
+            else None
+        out = []
+        for conv in self.convs:
+            x, v = conv(x, v, edge_index, operators if self.vector_stream
+                        else None)
+            out.append(x)
+        return out

@@ -1,0 +1,92 @@
+from typing import Sequence
+
+import torch
+from torch import Tensor
+from torch_geometric.data import Data
+from torch_geometric.nn import global_max_pool, global_mean_pool
+
+from tg_intrinsic.nn.delta_conv import scalar_mlp
+from tg_intrinsic.nn.models._deltanet_base import DeltaNetBase
+
+
+class DeltaNetClassification(torch.nn.Module):
+    r"""DeltaNet for point cloud classification, from the `"DeltaConv"
+    <https://arxiv.org/abs/2111.08799>`_ paper: :class:`DeltaConv` layers in
+    DGCNN's layout (static k-nn graph), the concatenated layer outputs
+    embedded to 1024 channels, global max and mean pooling, and an MLP head
+    (2048 - 512 - 256 - :math:`C`, dropout 0.5):
+
+    .. math::
+        \hat{y} = \mathrm{MLP}\Big(\big[\max_i \mathbf{e}_i \,\|\,
+        \operatorname{mean}_i \mathbf{e}_i\big]\Big), \qquad
+        \mathbf{e}_i = \mathrm{MLP}\big([\mathbf{x}^{(1)}_i \| \dots \|
+        \mathbf{x}^{(L)}_i]\big).
+
+    The operators come from the batch (:class:`~tg_intrinsic.transforms.
+    MLSOperators`) when present, otherwise they are built once per forward
+    on the batch's device and shared by all layers.
+
+    Args:
+        in_channels (int): Input scalars per point (``data.x``, or
+            ``data.pos`` when there is no ``x``).
+        num_classes (int): Number of classes.
+        conv_channels (Sequence[int], optional): Channels of the DeltaConv
+            layers. (default: :obj:`(64, 64, 128, 256)`)
+        depth (int, optional): Depth of the MLPs inside every layer.
+            (default: :obj:`1`)
+        k (int, optional): Neighbours of the operators. (default: :obj:`20`)
+        regularizer (float, optional): MLS regulariser. (default:
+            :obj:`1e-3`)
+        kernel_width (float, optional): MLS kernel width. (default:
+            :obj:`1.0`)
+        embedding_size (int, optional): Channels of the global embedding.
+            (default: :obj:`1024`)
+        dropout (float, optional): Dropout in the head. (default: :obj:`0.5`)
+        vector_stream (bool, optional): :obj:`False` drops the vector stream
+            (the paper's ablation). (default: :obj:`True`)
+
+    Shapes:
+        - **input:** a (batched) :class:`~torch_geometric.data.Data` with
+          ``pos`` :math:`(N, 3)` and optionally ``x``, ``normal``, ``batch``
+        - **output:** logits :math:`(B, C)`
+    """
+    def __init__(self, in_channels: int, num_classes: int,
+                 conv_channels: Sequence[int] = (64, 64, 128, 256),
+                 depth: int = 1, k: int = 20, regularizer: float = 1e-3,
+                 kernel_width: float = 1.0, embedding_size: int = 1024,
+                 dropout: float = 0.5, vector_stream: bool = True):
+        super().__init__()
+        self.in_channels = in_channels
+        self.num_classes = num_classes
+        self.conv_channels = tuple(conv_channels)
+        self.vector_stream = vector_stream
+        self.base = DeltaNetBase(in_channels, conv_channels, depth, k,
+                                 regularizer, kernel_width,
+                                 vector_stream=vector_stream)
+        self.embedding = scalar_mlp([sum(conv_channels), embedding_size])
+        self.head = torch.nn.Sequential(
+            scalar_mlp([2 * embedding_size, 512]), torch.nn.Dropout(dropout),
+            scalar_mlp([512, 256]), torch.nn.Dropout(dropout),
+            torch.nn.Linear(256, num_classes))
+
+    def reset_parameters(self):
+        self.base.reset_parameters()
+        self.embedding.reset_parameters()
+        for module in self.head:
+            if hasattr(module, 'reset_parameters'):
+                module.reset_parameters()
+
+    def forward(self, data: Data) -> Tensor:
+        x = self.embedding(torch.cat(self.base(data), dim=1))
+        batch = getattr(data, 'batch', None)
+        if batch is None:
+            batch = torch.zeros(x.size(0), dtype=torch.long, device=x.device)
+        size = int(batch.max()) + 1
+        pooled = torch.cat([global_max_pool(x, batch, size),
+                            global_mean_pool(x, batch, size)], dim=1)
+        return self.head(pooled)
+
+    def __repr__(self) -> str:
+        return (f'{self.__class__.__name__}({self.in_channels}, '
+                f'{self.num_classes}, conv_channels={self.conv_channels}, '
+                f'vector_stream={self.vector_stream})')

@@ -1,0 +1,40 @@
+import math
+
+import torch
+from torch import Tensor
+
+
+class VectorLinear(torch.nn.Module):
+    r"""A bias-free linear map between channels of tangent vector features,
+
+    .. math::
+        v'_{i, o} = \sum_c W_{oc} \, v_{i, c},
+
+    applied to both coordinates alike, so it commutes with rotations of the
+    tangent frames (a bias would not).
+
+    Args:
+        in_channels (int): Input vector channels.
+        out_channels (int): Output vector channels.
+
+    Shapes:
+        - **input:** :math:`(N, C_{in}, 2)`
+        - **output:** :math:`(N, C_{out}, 2)`
+    """
+    def __init__(self, in_channels: int, out_channels: int):
+        super().__init__()
+        self.in_channels = in_channels
+        self.out_channels = out_channels
+        self.weight = torch.nn.Parameter(torch.empty(out_channels,
+                                                     in_channels))
+        self.reset_parameters()
+
+    def reset_parameters(self):
+        torch.nn.init.kaiming_uniform_(self.weight, a=math.sqrt(5))
+
+    def forward(self, v: Tensor) -> Tensor:
+        return torch.einsum('oc,ncd->nod', self.weight, v)
+
+    def __repr__(self) -> str:
+        return (f'{self.__class__.__name__}({self.in_channels}, '
+                f'{self.out_channels})')

@@ -1,0 +1,56 @@
+import torch
+from torch import Tensor
+
+
+class VectorNonLin(torch.nn.Module):
+    r"""A nonlinearity on the norms of tangent vectors that keeps their
+    directions (DeltaConv),
+
+    .. math::
+        v'_{i, c} = \frac{\mathrm{ReLU}(\mathrm{BN}(\|v_{i, c}\|))}
+        {\|v_{i, c}\|} \, v_{i, c},
+
+    with batch norm over the norms of each channel (or a learned bias
+    :math:`\|v\| + b_c` when :obj:`batch_norm=False`), which shifts the
+    threshold of the ReLU. It is invariant to the choice of tangent frame.
+
+    Args:
+        channels (int): Vector channels.
+        batch_norm (bool, optional): Normalise the norms with
+            :class:`torch.nn.BatchNorm1d` instead of adding a bias.
+            (default: :obj:`True`)
+        eps (float, optional): Norms below this are treated as zero vectors.
+            (default: :obj:`1e-8`)
+
+    Shapes:
+        - **input / output:** :math:`(N, C, 2)`
+    """
+    def __init__(self, channels: int, batch_norm: bool = True,
+                 eps: float = 1e-8):
+        super().__init__()
+        self.channels = channels
+        self.eps = eps
+        if batch_norm:
+            self.norm = torch.nn.BatchNorm1d(channels)
+            self.register_parameter('bias', None)
+        else:
+            self.norm = None
+            self.bias = torch.nn.Parameter(torch.zeros(channels))
+        self.reset_parameters()
+
+    def reset_parameters(self):
+        if self.norm is not None:
+            self.norm.reset_parameters()
+        else:
+            torch.nn.init.zeros_(self.bias)
+
+    def forward(self, v: Tensor) -> Tensor:
+        # The norm with an eps inside the root keeps gradients finite at 0.
+        length = (v.pow(2).sum(-1) + self.eps ** 2).sqrt()
+        shifted = self.norm(length) if self.norm is not None \
+            else length + self.bias
+        return v * (torch.relu(shifted) / length).unsqueeze(-1)
+
+    def __repr__(self) -> str:
+        return (f'{self.__class__.__name__}({self.channels}, '
+                f'batch_norm={self.norm is not None})')

@@ -224,3 +224,26 @@ def test_bad_inputs():
     bad[3, 0] = float('nan')
     with pytest.raises(ValueError, match='NaN'):
         mls_grad_div(bad, frame, ei)
+
+
+def test_neighbor_max_regular_and_irregular(sphere_ops):
+    pos, frame, ei, gw, dw = sphere_ops
+    x = torch.randn(pos.size(0), 4, dtype=pos.dtype)
+    S = SurfaceOperators(ei, gw, dw, pos.size(0))
+    assert S.k == 20
+    ref = torch.full_like(x, float('-inf')).scatter_reduce(
+        0, ei[1, :, None].expand(-1, 4), x[ei[0]], 'amax')
+    assert torch.equal(S.neighbor_max(x), ref)
+    keep = torch.rand(ei.size(1)) < 0.7  # irregular, and shuffled
+    perm = torch.randperm(int(keep.sum()))
+    sub = ei[:, keep][:, perm]
+    S2 = SurfaceOperators(sub, gw[keep][perm], dw[keep][perm], pos.size(0))
+    assert S2.k is None
+    ref2 = torch.full_like(x, float('-inf')).scatter_reduce(
+        0, sub[1, :, None].expand(-1, 4), x[sub[0]], 'amax')
+    ref2[torch.isinf(ref2)] = 0.0
+    assert torch.equal(S2.neighbor_max(x), ref2)
+    # The shuffled edges give the same operators.
+    v = torch.randn(pos.size(0), 4, 2, dtype=pos.dtype)
+    assert torch.allclose(S2.div(v), ops.div(v, sub, dw[keep][perm]))
+    assert torch.allclose(S2.grad(x), ops.grad(x, sub, gw[keep][perm]))

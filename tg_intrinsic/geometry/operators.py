@@ -91,14 +91,31 @@ def hodge_laplacian(v: Tensor, edge_index: Tensor, grad_weight: Tensor,
     return -(gd - jgdj)
 
 
+class _SparseMM(torch.autograd.Function):
+    """``A @ x`` whose backward uses a precomputed ``A^T`` (torch's own
+    backward transposes and re-sorts the sparse matrix on every call)."""
+    @staticmethod
+    def forward(ctx, matrix: Tensor, transposed: Tensor, x: Tensor):
+        ctx.transposed = transposed
+        return torch.sparse.mm(matrix, x)
+
+    @staticmethod
+    def backward(ctx, grad_out: Tensor):
+        return None, None, torch.sparse.mm(ctx.transposed, grad_out)
+
+
 class SurfaceOperators:
     r"""Gradient and divergence of a (batched) point cloud as sparse CSR
     matrices, built once and shared by every layer of a network.
 
-    :math:`G` is stored as a :math:`(2N, N)` matrix whose rows :math:`2i` and
-    :math:`2i + 1` give the :math:`e_u` and :math:`e_v` components at
-    :math:`i`; :math:`D` as :math:`(N, 2N)`. Vector fields are converted
-    from and to ``[N, C, 2]`` at the boundary.
+    :math:`G` is stored as the block matrix :math:`[G_u; G_v]` of shape
+    :math:`(2N, N)` and :math:`D` as :math:`[D_a, D_b]` of shape
+    :math:`(N, 2N)`, together with their transposes for the backward pass;
+    all four are assembled without sorting from edges grouped by centre.
+    Vector fields are converted from and to ``[N, C, 2]`` at the boundary.
+    The neighbour graph is kept too: when every centre has the same number
+    :math:`k` of neighbours (a k-nn graph), :meth:`neighbor_max` is a dense
+    reduction over a :math:`(N, k, C)` view.
 
     Args:
         edge_index (torch.Tensor): Graph the weights live on
@@ -110,28 +127,35 @@ class SurfaceOperators:
     """
     def __init__(self, edge_index: Tensor, grad_weight: Tensor,
                  div_weight: Tensor, num_nodes: int):
-        j, i = edge_index
         n = num_nodes
-        two = torch.arange(2, device=j.device)
-        g_row = (2 * i).unsqueeze(1) + two  # [E, 2]
-        g_col = j.unsqueeze(1).expand(-1, 2)
-        self.G = _csr(g_row.reshape(-1), g_col.reshape(-1),
-                      grad_weight.reshape(-1), (2 * n, n))
-        d_row = i.unsqueeze(1).expand(-1, 2)
-        d_col = (2 * j).unsqueeze(1) + two
-        self.D = _csr(d_row.reshape(-1), d_col.reshape(-1),
-                      div_weight.reshape(-1), (n, 2 * n))
+        self.source_edge_index = edge_index  # as given, for identity checks
+        j, i = edge_index
+        if i.numel() > 1 and bool((i[1:] < i[:-1]).any()):
+            order = torch.argsort(i, stable=True)
+            j, i = j[order], i[order]
+            grad_weight, div_weight = grad_weight[order], div_weight[order]
+        self.edge_index = torch.stack([j, i])
         self.num_nodes = n
+        count = torch.bincount(i, minlength=n)
+        self.k = int(count[0]) if n > 0 and bool((count == count[0]).all()) \
+            else None
+        self.G = _block_rows(i, j, grad_weight, count, n)
+        self.D = _block_cols(i, j, div_weight, count, n)
+        by_j = torch.argsort(j, stable=True)
+        count_j = torch.bincount(j, minlength=n)
+        self.G_t = _block_cols(j[by_j], i[by_j], grad_weight[by_j], count_j,
+                               n)
+        self.D_t = _block_rows(j[by_j], i[by_j], div_weight[by_j], count_j, n)
 
     def grad(self, x: Tensor) -> Tensor:
         """:math:`G x`: ``[N, C]`` -> ``[N, C, 2]``."""
-        out = torch.sparse.mm(self.G, x)  # [2N, C]
-        return out.view(self.num_nodes, 2, -1).transpose(1, 2)
+        out = _SparseMM.apply(self.G, self.G_t, x)  # [2N, C]
+        return out.view(2, self.num_nodes, -1).permute(1, 2, 0)
 
     def div(self, v: Tensor) -> Tensor:
         """:math:`D v`: ``[N, C, 2]`` -> ``[N, C]``."""
-        flat = v.transpose(1, 2).reshape(2 * self.num_nodes, -1)
-        return torch.sparse.mm(self.D, flat)
+        flat = v.permute(2, 0, 1).reshape(2 * self.num_nodes, -1)
+        return _SparseMM.apply(self.D, self.D_t, flat)
 
     def curl(self, v: Tensor) -> Tensor:
         """:math:`-D J v`: ``[N, C, 2]`` -> ``[N, C]``."""
@@ -148,17 +172,57 @@ class SurfaceOperators:
         both = self.grad(torch.cat([self.div(v), self.div(rotate_j(v))], 1))
         return rotate_j(both[:, c:]) - both[:, :c]
 
+    def neighbor_max(self, x: Tensor) -> Tensor:
+        r""":math:`\max_{j \in \mathcal{N}(i)} x_j` over the graph."""
+        j, i = self.edge_index
+        if self.k is not None:
+            return x[j].view(self.num_nodes, self.k, -1).amax(dim=1)
+        out = x.new_full((self.num_nodes, x.size(1)), float('-inf'))
+        out = out.scatter_reduce(0, i.unsqueeze(1).expand(-1, x.size(1)),
+                                 x[j], 'amax')
+        return out.masked_fill(torch.isinf(out), 0.0)
+
     def to(self, device) -> 'SurfaceOperators':
-        self.G, self.D = self.G.to(device), self.D.to(device)
+        for name in ('G', 'D', 'G_t', 'D_t', 'edge_index'):
+            setattr(self, name, getattr(self, name).to(device))
         return self
 
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}(num_nodes={self.num_nodes}, '
-                f'nnz={self.G._nnz()})')
+                f'num_edges={self.edge_index.size(1)}, k={self.k})')
 
 
-def _csr(row: Tensor, col: Tensor, value: Tensor,
-         size: Tuple[int, int]) -> Tensor:
-    coo = torch.sparse_coo_tensor(torch.stack([row, col]), value, size,
-                                  check_invariants=False).coalesce()
-    return coo.to_sparse_csr()
+def _crow(count: Tensor) -> Tensor:
+    crow = torch.zeros(count.numel() + 1, dtype=torch.long,
+                       device=count.device)
+    crow[1:] = count.cumsum(0)
+    return crow
+
+
+def _block_rows(row: Tensor, col: Tensor, value: Tensor, count: Tensor,
+                n: int) -> Tensor:
+    """CSR of ``[A_0; A_1]`` (2n x n), ``A_c[row, col] = value[:, c]``, from
+    entries sorted by row."""
+    crow = _crow(count)
+    e = row.numel()
+    return torch.sparse_csr_tensor(
+        torch.cat([crow, crow[1:] + e]), torch.cat([col, col]),
+        torch.cat([value[:, 0], value[:, 1]]), (2 * n, n),
+        check_invariants=False)
+
+
+def _block_cols(row: Tensor, col: Tensor, value: Tensor, count: Tensor,
+                n: int) -> Tensor:
+    """CSR of ``[A_0, A_1]`` (n x 2n), ``A_c[row, col] = value[:, c]``, from
+    entries sorted by row."""
+    crow = _crow(count)
+    slot = torch.arange(row.numel(), device=row.device) - crow[row]
+    first = 2 * crow[row] + slot  # row r: its A_0 entries, then its A_1
+    second = first + count[row]
+    cols = torch.empty(2 * row.numel(), dtype=torch.long, device=row.device)
+    values = torch.empty(2 * row.numel(), dtype=value.dtype,
+                         device=row.device)
+    cols[first], cols[second] = col, col + n
+    values[first], values[second] = value[:, 0], value[:, 1]
+    return torch.sparse_csr_tensor(2 * crow, cols, values, (n, 2 * n),
+                                   check_invariants=False)

@@ -117,6 +117,9 @@ class DeltaConv(MessagePassing):
             j, i = edge_index
             x_max = self.aggr_module(self.mlp_neighbors(x[j] - x[i]), i,
                                      dim_size=x.size(0))
+        elif operators is not None and \
+                edge_index is operators.source_edge_index:
+            x_max = operators.neighbor_max(self.mlp_neighbors(x))
         else:
             x_max = self.propagate(edge_index, x=self.mlp_neighbors(x))
         out = self.mlp_scalar(x_ops) + x_max

@@ -226,14 +226,15 @@ def test_bad_inputs():
         mls_grad_div(bad, frame, ei)
 
 
-def test_neighbor_max_regular_and_irregular(sphere_ops):
+@pytest.mark.parametrize('backend', ['numba', 'torch'])
+def test_neighbor_max_regular_and_irregular(sphere_ops, backend):
     pos, frame, ei, gw, dw = sphere_ops
     x = torch.randn(pos.size(0), 4, dtype=pos.dtype)
     S = SurfaceOperators(ei, gw, dw, pos.size(0))
     assert S.k == 20
     ref = torch.full_like(x, float('-inf')).scatter_reduce(
         0, ei[1, :, None].expand(-1, 4), x[ei[0]], 'amax')
-    assert torch.equal(S.neighbor_max(x), ref)
+    assert torch.equal(S.neighbor_max(x, backend), ref)
     keep = torch.rand(ei.size(1)) < 0.7  # irregular, and shuffled
     perm = torch.randperm(int(keep.sum()))
     sub = ei[:, keep][:, perm]
@@ -242,7 +243,18 @@ def test_neighbor_max_regular_and_irregular(sphere_ops):
     ref2 = torch.full_like(x, float('-inf')).scatter_reduce(
         0, sub[1, :, None].expand(-1, 4), x[sub[0]], 'amax')
     ref2[torch.isinf(ref2)] = 0.0
-    assert torch.equal(S2.neighbor_max(x), ref2)
+    assert torch.equal(S2.neighbor_max(x, backend), ref2)
+    # Gradients flow to the winning neighbour, as with a plain amax.
+    for graph, ops_ in ((ei, S), (sub, S2)):
+        xg = x.clone().requires_grad_()
+        weight = torch.arange(4.0, dtype=x.dtype)
+        (ops_.neighbor_max(xg, backend) * weight).sum().backward()
+        xr = x.clone().requires_grad_()
+        ref = torch.full_like(x, float('-inf')).scatter_reduce(
+            0, graph[1, :, None].expand(-1, 4), xr[graph[0]], 'amax')
+        (ref.masked_fill(torch.isinf(ref), 0.0)
+         * torch.arange(4.0, dtype=x.dtype)).sum().backward()
+        assert torch.allclose(xg.grad, xr.grad)
     # The shuffled edges give the same operators.
     v = torch.randn(pos.size(0), 4, 2, dtype=pos.dtype)
     assert torch.allclose(S2.div(v), ops.div(v, sub, dw[keep][perm]))

@@ -22,9 +22,11 @@ derived operators are
     \Delta_H = -(G D - J G D J).
 """
 import warnings
-from typing import Tuple
+from typing import Optional, Tuple
 
+import numpy as np
 import torch
+from numba import njit, prange
 from torch import Tensor
 
 # CSR matrix products are stable for what is used here (mm with a dense
@@ -137,6 +139,7 @@ class SurfaceOperators:
         self.edge_index = torch.stack([j, i])
         self.num_nodes = n
         count = torch.bincount(i, minlength=n)
+        self.crow = _crow(count)
         self.k = int(count[0]) if n > 0 and bool((count == count[0]).all()) \
             else None
         self.G = _block_rows(i, j, grad_weight, count, n)
@@ -172,18 +175,52 @@ class SurfaceOperators:
         both = self.grad(torch.cat([self.div(v), self.div(rotate_j(v))], 1))
         return rotate_j(both[:, c:]) - both[:, :c]
 
-    def neighbor_max(self, x: Tensor) -> Tensor:
-        r""":math:`\max_{j \in \mathcal{N}(i)} x_j` over the graph."""
+    def neighbor_max(self, x: Tensor, backend: Optional[str] = None
+                     ) -> Tensor:
+        r""":math:`\max_{j \in \mathcal{N}(i)} x_j` over the graph (0 where a
+        point has no neighbour). The winning neighbour of every channel is
+        found without autograd and then gathered, so the backward pass is a
+        scatter of :math:`(N, C)` values instead of an :math:`(E, C)` mask.
+        ``backend``: ``'numba'`` (CPU) or ``'torch'``; default: numba on CPU.
+        """
         j, i = self.edge_index
-        if self.k is not None:
-            return x[j].view(self.num_nodes, self.k, -1).amax(dim=1)
-        out = x.new_full((self.num_nodes, x.size(1)), float('-inf'))
-        out = out.scatter_reduce(0, i.unsqueeze(1).expand(-1, x.size(1)),
-                                 x[j], 'amax')
-        return out.masked_fill(torch.isinf(out), 0.0)
+        c = x.size(1)
+        if j.numel() == 0:
+            return x.new_zeros(self.num_nodes, c) + 0 * x.sum()
+        if backend is None:
+            backend = 'numba' if x.device.type == 'cpu' else 'torch'
+        empty = None
+        with torch.no_grad():
+            if backend == 'numba':
+                winner = torch.from_numpy(_neighbor_argmax(
+                    x.detach().contiguous().numpy(), self.crow.numpy(),
+                    j.numpy()))
+                empty = winner < 0
+                winner = winner.clamp(min=0)
+            elif self.k is not None:
+                slot = x[j].view(self.num_nodes, self.k, c).argmax(dim=1)
+                winner = j.view(self.num_nodes, self.k).gather(1, slot)
+            else:
+                best = x.new_full((self.num_nodes, c), float('-inf'))
+                best = best.scatter_reduce(0, i[:, None].expand(-1, c), x[j],
+                                           'amax')
+                # The first edge (lowest position) that attains the maximum.
+                hit = x[j] == best[i]
+                pos = torch.arange(j.numel(), device=j.device)[:, None]
+                pos = torch.where(hit, pos, j.numel())
+                first = torch.full((self.num_nodes, c), j.numel(),
+                                   device=j.device, dtype=torch.long)
+                first = first.scatter_reduce(0, i[:, None].expand(-1, c), pos,
+                                             'amin')
+                empty = first == j.numel()
+                winner = j[first.clamp(max=max(j.numel() - 1, 0))]
+        out = x.gather(0, winner)
+        if empty is not None and bool(empty.any()):
+            out = out.masked_fill(empty, 0.0)
+        return out
 
     def to(self, device) -> 'SurfaceOperators':
-        for name in ('G', 'D', 'G_t', 'D_t', 'edge_index'):
+        for name in ('G', 'D', 'G_t', 'D_t', 'edge_index', 'crow'):
             setattr(self, name, getattr(self, name).to(device))
         return self
 
@@ -226,3 +263,25 @@ def _block_cols(row: Tensor, col: Tensor, value: Tensor, count: Tensor,
     values[first], values[second] = value[:, 0], value[:, 1]
     return torch.sparse_csr_tensor(2 * crow, cols, values, (n, 2 * n),
                                    check_invariants=False)
+
+
+@njit(cache=True, parallel=True)
+def _neighbor_argmax(x, crow, nbr):  # pragma: no cover (numba)
+    """Per point and channel, the neighbour holding the maximum (the first
+    one on ties); -1 for points without neighbours."""
+    n, c = crow.shape[0] - 1, x.shape[1]
+    winner = np.full((n, c), -1, dtype=np.int64)
+    for i in prange(n):
+        lo, hi = crow[i], crow[i + 1]
+        if hi == lo:
+            continue
+        best = x[nbr[lo]].copy()
+        win = winner[i]
+        win[:] = nbr[lo]
+        for e in range(lo + 1, hi):
+            row = x[nbr[e]]
+            for ch in range(c):
+                if row[ch] > best[ch]:
+                    best[ch] = row[ch]
+                    win[ch] = nbr[e]
+    return winner

@@ -35,6 +35,22 @@ warnings.filterwarnings('ignore', message='Sparse CSR tensor support is in '
                         'beta state')
 
 
+def planar(v: Tensor) -> Tensor:
+    """A ``[2, N, C]`` view of a ``[N, C, 2]`` vector field (no copy)."""
+    return v.permute(2, 0, 1)
+
+
+def interleaved(v: Tensor) -> Tensor:
+    """The ``[N, C, 2]`` view of a ``[2, N, C]`` vector field (no copy).
+
+    Vector features are ``[N, C, 2]`` in every public signature; inside the
+    layers they are stored as two contiguous planes ``[2, N, C]`` and handed
+    around as this view, so that linear maps, concatenation and
+    elementwise work run on contiguous memory instead of pairs.
+    """
+    return v.permute(1, 2, 0)
+
+
 def rotate_j(v: Tensor) -> Tensor:
     r"""Rotates every tangent vector by +90 degrees,
     :math:`J (a, b) = (-b, a)`.
@@ -42,7 +58,25 @@ def rotate_j(v: Tensor) -> Tensor:
     Shapes:
         - **input / output:** :math:`(N, C, 2)`
     """
-    return torch.stack([-v[..., 1], v[..., 0]], dim=-1)
+    p = planar(v)
+    return interleaved(torch.stack([-p[1], p[0]]))
+
+
+def cat_vectors(vectors) -> Tensor:
+    """Concatenates ``[N, C_k, 2]`` vector fields along the channels."""
+    return interleaved(torch.cat([planar(v) for v in vectors], dim=-1))
+
+
+def vector_norm(v: Tensor, eps: float = 1e-8) -> Tensor:
+    r"""Length of every tangent vector, :math:`\sqrt{a^2 + b^2 +
+    \epsilon^2}`, smooth at zero.
+
+    Shapes:
+        - **input:** :math:`(N, C, 2)`
+        - **output:** :math:`(N, C)`
+    """
+    p = planar(v)
+    return (p[0].square() + p[1].square() + eps ** 2).sqrt()
 
 
 def grad(x: Tensor, edge_index: Tensor, grad_weight: Tensor) -> Tensor:
@@ -153,11 +187,11 @@ class SurfaceOperators:
     def grad(self, x: Tensor) -> Tensor:
         """:math:`G x`: ``[N, C]`` -> ``[N, C, 2]``."""
         out = _SparseMM.apply(self.G, self.G_t, x)  # [2N, C]
-        return out.view(2, self.num_nodes, -1).permute(1, 2, 0)
+        return interleaved(out.view(2, self.num_nodes, -1))
 
     def div(self, v: Tensor) -> Tensor:
         """:math:`D v`: ``[N, C, 2]`` -> ``[N, C]``."""
-        flat = v.permute(2, 0, 1).reshape(2 * self.num_nodes, -1)
+        flat = planar(v).reshape(2 * self.num_nodes, -1)
         return _SparseMM.apply(self.D, self.D_t, flat)
 
     def curl(self, v: Tensor) -> Tensor:
@@ -172,7 +206,7 @@ class SurfaceOperators:
         """:math:`-(G D - J G D J) v`: ``[N, C, 2]`` -> ``[N, C, 2]``."""
         # Both terms share G: stack D v and D J v along channels.
         c = v.size(1)
-        both = self.grad(torch.cat([self.div(v), self.div(rotate_j(v))], 1))
+        both = self.grad(self.div(cat_vectors([v, rotate_j(v)])))
         return rotate_j(both[:, c:]) - both[:, :c]
 
     def neighbor_max(self, x: Tensor, backend: Optional[str] = None
@@ -218,6 +252,16 @@ class SurfaceOperators:
         if empty is not None and bool(empty.any()):
             out = out.masked_fill(empty, 0.0)
         return out
+
+    def edge_max(self, values: Tensor) -> Tensor:
+        r"""Per centre, the maximum of per-edge values given in the order of
+        :attr:`edge_index` (0 where a point has no edge)."""
+        if self.k is not None:
+            return values.view(self.num_nodes, self.k, -1).amax(dim=1)
+        i = self.edge_index[1]
+        out = values.new_zeros(self.num_nodes, values.size(1))
+        return out.scatter_reduce(0, i[:, None].expand_as(values), values,
+                                  'amax', include_self=False)
 
     def to(self, device) -> 'SurfaceOperators':
         for name in ('G', 'D', 'G_t', 'D_t', 'edge_index', 'crow'):

@@ -1,22 +1,21 @@
 from typing import Optional, Tuple
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor
 from torch_geometric.nn import MLP, MessagePassing
 
-from tg_intrinsic.geometry.operators import SurfaceOperators, rotate_j
+from tg_intrinsic.geometry.operators import (SurfaceOperators, interleaved,
+                                             planar, vector_norm)
+from tg_intrinsic.nn.vector_linear import VectorLinear
 from tg_intrinsic.nn.vector_mlp import VectorMLP
+from tg_intrinsic.nn.vector_nonlin import VectorNonLin
 
 
 def scalar_mlp(channels, plain_last: bool = False) -> MLP:
     """DeltaConv's scalar MLP: bias-free linear, batch norm, LeakyReLU(0.2)."""
     return MLP(channels, act='leaky_relu', act_kwargs={'negative_slope': 0.2},
                norm='batch_norm', bias=False, plain_last=plain_last)
-
-
-def vector_norm(v: Tensor, eps: float = 1e-8) -> Tensor:
-    """Length of every tangent vector, smooth at zero."""
-    return (v.pow(2).sum(-1) + eps ** 2).sqrt()
 
 
 class DeltaConv(MessagePassing):
@@ -86,44 +85,77 @@ class DeltaConv(MessagePassing):
         self.mlp_neighbors = scalar_mlp([in_channels] + hidden)
         vec_channels = 0 if not vector_input else (
             out_channels if vector else in_channels)
-        self.mlp_scalar = scalar_mlp([in_channels + 3 * vec_channels] + hidden)
-        self.mlp_vector = VectorMLP([6 * in_channels] + hidden) \
-            if vector else None
+        # h1 and h0 are MLPs on concatenated inputs; their first linear maps
+        # are kept separate so that forward() can apply them block by block
+        # (no concatenation, and D, curl act on C_out channels, not 2 C_in).
+        self.lin_scalar = torch.nn.Linear(in_channels + 3 * vec_channels,
+                                          out_channels, bias=False)
+        self.post_scalar = torch.nn.Sequential(
+            torch.nn.BatchNorm1d(out_channels), torch.nn.LeakyReLU(0.2),
+            *([scalar_mlp(hidden)] if depth > 1 else []))
+        if vector:
+            self.lin_vector = VectorLinear(6 * in_channels, out_channels)
+            self.post_vector = torch.nn.Sequential(
+                VectorNonLin(out_channels),
+                *([VectorMLP(hidden)] if depth > 1 else []))
+        else:
+            self.lin_vector = self.post_vector = None
         self.reset_parameters()
 
     def reset_parameters(self):
         super().reset_parameters()
-        self.mlp_neighbors.reset_parameters()
-        self.mlp_scalar.reset_parameters()
-        if self.mlp_vector is not None:
-            self.mlp_vector.reset_parameters()
+        for module in self.modules():
+            if module is not self and hasattr(module, 'reset_parameters'):
+                module.reset_parameters()
 
     def forward(self, x: Tensor, v: Optional[Tensor], edge_index: Tensor,
                 operators: Optional[SurfaceOperators]
                 ) -> Tuple[Tensor, Optional[Tensor]]:
-        if self.mlp_vector is not None:
-            v_in = torch.cat([v, operators.grad(x),
-                              operators.hodge_laplacian(v)], dim=1)
-            v = self.mlp_vector(torch.cat([v_in, rotate_j(v_in)], dim=1))
+        c_in, c_out = self.in_channels, self.out_channels
+        if self.lin_vector is not None:
+            # h0 on [u, J u], u = [v, G x, L_H v]: with W = [W_A, W_B],
+            # W [u, J u] = W_A u + J W_B u, one product per block of u.
+            weight = self.lin_vector.weight
+            both = None
+            for block, piece in enumerate(
+                    (v, operators.grad(x), operators.hodge_laplacian(v))):
+                cols = slice(block * c_in, (block + 1) * c_in)
+                w = torch.cat([weight[:, cols],
+                               weight[:, 3 * c_in + cols.start:
+                                      3 * c_in + cols.stop]])
+                term = F.linear(planar(piece), w)  # [2, N, 2 C_out]
+                both = term if both is None else both + term
+            a, b = both[..., :c_out], both[..., c_out:]
+            v = self.post_vector(interleaved(torch.stack(
+                [a[0] - b[1], a[1] + b[0]])))
+        weight = self.lin_scalar.weight
+        out = F.linear(x, weight[:, :c_in])
         if self.vector_input:
-            # D v and curl v = -D J v share one sparse product.
+            # h1 on [x, D v, curl v, |v|]: W_d D v + W_c curl v
+            # = D (W_d v - J W_c v), a single divergence on C_out channels.
             c = v.size(1)
-            div_curl = operators.div(torch.cat([v, -rotate_j(v)], dim=1))
-            x_ops = torch.cat([x, div_curl[:, :c], div_curl[:, c:],
-                               vector_norm(v)], dim=1)
-        else:
-            x_ops = x
-        if self.centralized:  # a per-edge MLP, then the aggregation
+            dc = F.linear(planar(v), torch.cat([
+                weight[:, c_in:c_in + c], weight[:, c_in + c:c_in + 2 * c]]))
+            d, k = dc[..., :c_out], dc[..., c_out:]
+            out = out + operators.div(interleaved(torch.stack(
+                [d[0] + k[1], d[1] - k[0]])))
+            out = out + F.linear(vector_norm(v), weight[:, c_in + 2 * c:])
+        out = self.post_scalar(out)
+        fast = operators is not None and \
+            edge_index is operators.source_edge_index
+        if self.centralized and fast:  # a per-edge MLP, then the maximum
+            j, i = operators.edge_index
+            x_max = operators.edge_max(self.mlp_neighbors(x[j] - x[i]))
+        elif self.centralized:
             j, i = edge_index
             x_max = self.aggr_module(self.mlp_neighbors(x[j] - x[i]), i,
                                      dim_size=x.size(0))
-        elif operators is not None and \
-                edge_index is operators.source_edge_index:
+        elif fast:
             x_max = operators.neighbor_max(self.mlp_neighbors(x))
         else:
             x_max = self.propagate(edge_index, x=self.mlp_neighbors(x))
-        out = self.mlp_scalar(x_ops) + x_max
-        return out, (v if self.mlp_vector is not None else None)
+        out = out + x_max
+        return out, (v if self.lin_vector is not None else None)
 
     def message(self, x_j: Tensor) -> Tensor:
         return x_j

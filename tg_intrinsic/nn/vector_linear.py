@@ -3,6 +3,8 @@ import math
 import torch
 from torch import Tensor
 
+from tg_intrinsic.geometry.operators import interleaved, planar
+
 
 class VectorLinear(torch.nn.Module):
     r"""A bias-free linear map between channels of tangent vector features,
@@ -33,7 +35,8 @@ class VectorLinear(torch.nn.Module):
         torch.nn.init.kaiming_uniform_(self.weight, a=math.sqrt(5))
 
     def forward(self, v: Tensor) -> Tensor:
-        return torch.einsum('oc,ncd->nod', self.weight, v)
+        # On the [2, N, C] planes this is one matrix product, no copies.
+        return interleaved(torch.nn.functional.linear(planar(v), self.weight))
 
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}({self.in_channels}, '

@@ -1,6 +1,8 @@
 import torch
 from torch import Tensor
 
+from tg_intrinsic.geometry.operators import interleaved, planar, vector_norm
+
 
 class VectorNonLin(torch.nn.Module):
     r"""A nonlinearity on the norms of tangent vectors that keeps their
@@ -46,10 +48,10 @@ class VectorNonLin(torch.nn.Module):
 
     def forward(self, v: Tensor) -> Tensor:
         # The norm with an eps inside the root keeps gradients finite at 0.
-        length = (v.pow(2).sum(-1) + self.eps ** 2).sqrt()
+        length = vector_norm(v, self.eps)
         shifted = self.norm(length) if self.norm is not None \
             else length + self.bias
-        return v * (torch.relu(shifted) / length).unsqueeze(-1)
+        return interleaved(planar(v) * (torch.relu(shifted) / length))
 
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}({self.channels}, '

@@ -1,0 +1,59 @@
+import json
+import os
+
+import pytest
+import torch
+
+from tg_intrinsic.train import main, parse_args
+
+
+def run(tmp_path, *extra):
+    return main(['--dataset', 'synthetic_modelnet', '--root',
+                 str(tmp_path / 'data'), '--out', str(tmp_path / 'run'),
+                 '--num-points', '96', '--shapes-per-class', '4',
+                 '--batch-size', '8', '--conv-channels', '8', '8',
+                 '--k', '8', '--eval-every', '1', '--quiet', *extra])
+
+
+def test_training_writes_outputs_and_resumes(tmp_path):
+    metrics = run(tmp_path, '--epochs', '2')
+    out = tmp_path / 'run'
+    for name in ('checkpoint.pt', 'metrics.json', 'learning_curve.png'):
+        assert (out / name).exists(), name
+    assert len(metrics['history']) == 2
+    assert 0.0 <= metrics['final_test_accuracy'] <= 1.0
+    state = torch.load(out / 'checkpoint.pt', weights_only=False)
+    assert state['epoch'] == 2
+    # Resuming continues from the checkpoint instead of starting over.
+    metrics = run(tmp_path, '--epochs', '3', '--resume')
+    assert [h['epoch'] for h in metrics['history']] == [1, 2, 3]
+    assert json.loads((out / 'metrics.json').read_text())[
+        'final_test_accuracy'] == metrics['final_test_accuracy']
+    assert not [f for f in os.listdir(out) if f.startswith('.tmp')]
+
+
+def test_mesh_folder_needs_a_root(tmp_path):
+    with pytest.raises(ValueError, match='--mesh-root'):
+        main(['--dataset', 'mesh_folder', '--out', str(tmp_path),
+              '--epochs', '1', '--quiet'])
+    with pytest.raises(SystemExit):
+        parse_args(['--epochs', '0'])
+
+
+def test_training_on_a_mesh_folder(tmp_path):
+    import trimesh
+    shapes = {'ball': lambda s: trimesh.creation.icosphere(2, radius=s),
+              'box': lambda s: trimesh.creation.box((s, 2 * s, 0.5 * s))}
+    for name, make in shapes.items():
+        for split in ('train', 'test'):
+            folder = tmp_path / 'meshes' / name / split
+            folder.mkdir(parents=True)
+            for i in range(3):
+                make(1.0 + 0.1 * i).export(folder / f'{name}_{i}.off')
+    metrics = main(['--dataset', 'mesh_folder', '--mesh-root',
+                    str(tmp_path / 'meshes'), '--out', str(tmp_path / 'run'),
+                    '--num-points', '96', '--batch-size', '4',
+                    '--conv-channels', '8', '8', '--k', '8', '--epochs', '1',
+                    '--quiet'])
+    assert metrics['dataset'] == 'mesh_folder'
+    assert len(metrics['history']) == 1

@@ -1,0 +1,258 @@
+"""Train a classification network on the synthetic data sets or your own.
+
+Examples::
+
+    python -m tg_intrinsic.train --dataset synthetic_modelnet --epochs 30
+    python -m tg_intrinsic.train --dataset synthetic_shrec --num-points 1024
+    python -m tg_intrinsic.train --dataset mesh_folder --mesh-root ModelNet10
+
+Writes to ``--out``: ``checkpoint.pt`` (model, optimiser, schedule, history;
+written atomically at every evaluation, so ``--resume`` continues an
+interrupted run), ``metrics.json`` and ``learning_curve.png``.
+"""
+import argparse
+import os
+import time
+from typing import Dict, List, Optional
+
+import torch
+import torch.nn.functional as F
+from torch_geometric.loader import DataLoader
+from torch_geometric.transforms import (Compose, NormalizeScale, RandomScale,
+                                        SamplePoints)
+from tqdm import tqdm
+
+from tg_intrinsic.utils import atomic_torch_save, atomic_write_json
+
+DATASETS = ('synthetic_modelnet', 'synthetic_shrec', 'mesh_folder')
+
+
+def build_datasets(name: str, root: str, num_points: int,
+                   mesh_root: Optional[str] = None, seed: int = 0,
+                   shapes_per_class: Optional[int] = None):
+    """The train and test splits of a data set as point clouds with normals.
+
+    Meshes (SyntheticSHREC, MeshFolder) are turned into ``num_points``
+    points sampled uniformly from the surface, with face normals (the faces
+    are dropped). ``shapes_per_class`` shrinks the synthetic sets (half for
+    training) for quick runs.
+    """
+    from tg_intrinsic.datasets import (MeshFolder, SyntheticModelNet,
+                                       SyntheticSHREC)
+    sample = Compose([SamplePoints(num_points, include_normals=True),
+                      NormalizeScale()])
+    if name == 'synthetic_modelnet':
+        path = os.path.join(root, 'SyntheticModelNet')
+        kwargs = dict(num_points=num_points, seed=seed)
+        if shapes_per_class is not None:
+            kwargs['num_per_class'] = (max(1, shapes_per_class // 2),
+                                       max(1, shapes_per_class // 2))
+        return (SyntheticModelNet(path, 'train', **kwargs),
+                SyntheticModelNet(path, 'test', **kwargs))
+    if name == 'synthetic_shrec':
+        path = os.path.join(root, 'SyntheticSHREC')
+        kwargs = dict(seed=seed, transform=sample)
+        if shapes_per_class is not None:
+            kwargs.update(num_per_class=shapes_per_class,
+                          num_train_per_class=max(1, shapes_per_class // 2))
+        return (SyntheticSHREC(path, 'train', **kwargs),
+                SyntheticSHREC(path, 'test', **kwargs))
+    if name == 'mesh_folder':
+        if mesh_root is None:
+            raise ValueError("--dataset mesh_folder needs --mesh-root PATH "
+                             "(laid out as PATH/<class>/<split>/*.off)")
+        return (MeshFolder(mesh_root, 'train', transform=sample),
+                MeshFolder(mesh_root, 'test', transform=sample))
+    raise ValueError(f"unknown dataset {name!r}; choose one of {DATASETS}")
+
+
+def build_model(name: str, num_classes: int, args) -> torch.nn.Module:
+    if name == 'deltanet':
+        from tg_intrinsic.nn.models import DeltaNetClassification
+        return DeltaNetClassification(
+            3, num_classes, conv_channels=args.conv_channels, k=args.k,
+            vector_stream=not args.no_vector_stream)
+    raise ValueError(f"unknown model {name!r}; choose 'deltanet'")
+
+
+@torch.no_grad()
+def evaluate(model, loader, device) -> float:
+    model.eval()
+    correct = total = 0
+    for batch in loader:
+        batch = batch.to(device)
+        pred = model(batch).argmax(dim=-1)
+        correct += int((pred == batch.y.view(-1)).sum())
+        total += pred.numel()
+    return correct / max(total, 1)
+
+
+def plot_history(history: List[Dict], path: str, title: str):
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    epochs = [h['epoch'] for h in history]
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+    ax[0].plot(epochs, [h['train_loss'] for h in history])
+    ax[0].set_xlabel('epoch')
+    ax[0].set_ylabel('training loss')
+    ax[1].plot(epochs, [h['train_accuracy'] for h in history], label='train')
+    tested = [h for h in history if h.get('test_accuracy') is not None]
+    ax[1].plot([h['epoch'] for h in tested],
+               [h['test_accuracy'] for h in tested], 'o-', label='test')
+    ax[1].set_xlabel('epoch')
+    ax[1].set_ylabel('accuracy')
+    ax[1].set_ylim(0, 1)
+    ax[1].legend()
+    fig.suptitle(title)
+    fig.tight_layout()
+    tmp = path + '.tmp.png'
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    os.replace(tmp, path)
+
+
+def train(args) -> Dict:
+    torch.manual_seed(args.seed)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    device = torch.device(args.device if args.device != 'auto' else
+                          ('cuda' if torch.cuda.is_available() else 'cpu'))
+    train_set, test_set = build_datasets(args.dataset, args.root,
+                                         args.num_points, args.mesh_root,
+                                         args.data_seed,
+                                         args.shapes_per_class)
+    augment = RandomScale((2 / 3, 3 / 2))
+    train_set.transform = Compose([t for t in (train_set.transform, augment)
+                                   if t is not None])
+    model = build_model(args.model, train_set.num_classes, args).to(device)
+    optimizer = torch.optim.Adam(model.parameters(), lr=args.lr,
+                                 weight_decay=args.weight_decay)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(
+        optimizer, T_max=args.epochs, eta_min=args.lr / 100)
+    os.makedirs(args.out, exist_ok=True)
+    checkpoint_path = os.path.join(args.out, 'checkpoint.pt')
+    history: List[Dict] = []
+    start_epoch = 1
+    if args.resume and os.path.exists(checkpoint_path):
+        state = torch.load(checkpoint_path, map_location=device,
+                           weights_only=False)
+        model.load_state_dict(state['model'])
+        optimizer.load_state_dict(state['optimizer'])
+        schedule.load_state_dict(state['schedule'])
+        history = state['history']
+        start_epoch = state['epoch'] + 1
+        print(f"resuming from epoch {state['epoch']} of {checkpoint_path}")
+
+    generator = torch.Generator().manual_seed(args.seed)
+    train_loader = DataLoader(train_set, args.batch_size, shuffle=True,
+                              drop_last=len(train_set) > args.batch_size,
+                              generator=generator)
+    test_loader = DataLoader(test_set, args.batch_size)
+    num_params = sum(p.numel() for p in model.parameters())
+    print(f"{args.model} ({num_params / 1e6:.2f}M parameters) on "
+          f"{args.dataset}: {len(train_set)} train / {len(test_set)} test, "
+          f"{train_set.num_classes} classes, {device}")
+    started = time.perf_counter()
+    for epoch in range(start_epoch, args.epochs + 1):
+        model.train()
+        loss_sum = correct = seen = 0
+        bar = tqdm(train_loader, desc=f'epoch {epoch}/{args.epochs}',
+                   leave=False, disable=args.quiet)
+        for batch in bar:
+            batch = batch.to(device)
+            optimizer.zero_grad()
+            out = model(batch)
+            loss = F.cross_entropy(out, batch.y.view(-1),
+                                   label_smoothing=args.label_smoothing)
+            if not torch.isfinite(loss):
+                raise RuntimeError(f"the training loss became {loss.item()} "
+                                   f"in epoch {epoch}; lower --lr")
+            loss.backward()
+            optimizer.step()
+            n = batch.y.numel()
+            loss_sum += float(loss) * n
+            correct += int((out.argmax(-1) == batch.y.view(-1)).sum())
+            seen += n
+            bar.set_postfix(loss=f'{loss_sum / seen:.3f}')
+        schedule.step()
+        record = {'epoch': epoch, 'train_loss': loss_sum / max(seen, 1),
+                  'train_accuracy': correct / max(seen, 1),
+                  'test_accuracy': None,
+                  'seconds': time.perf_counter() - started}
+        if epoch % args.eval_every == 0 or epoch == args.epochs:
+            record['test_accuracy'] = evaluate(model, test_loader, device)
+        history.append(record)
+        if record['test_accuracy'] is not None:
+            print(f"epoch {epoch}: loss {record['train_loss']:.3f}, "
+                  f"train {record['train_accuracy']:.3f}, "
+                  f"test {record['test_accuracy']:.3f}")
+            atomic_torch_save({'model': model.state_dict(),
+                               'optimizer': optimizer.state_dict(),
+                               'schedule': schedule.state_dict(),
+                               'history': history, 'epoch': epoch,
+                               'args': vars(args)}, checkpoint_path)
+            plot_history(history, os.path.join(args.out,
+                                               'learning_curve.png'),
+                         f'{args.model} on {args.dataset}')
+    final = history[-1]['test_accuracy'] if history else None
+    metrics = {'model': args.model, 'dataset': args.dataset,
+               'parameters': num_params, 'final_test_accuracy': final,
+               'best_test_accuracy': max(
+                   (h['test_accuracy'] for h in history
+                    if h['test_accuracy'] is not None), default=None),
+               'history': history, 'args': vars(args)}
+    atomic_write_json(os.path.join(args.out, 'metrics.json'), metrics)
+    print(f"final test accuracy: {final:.3f} (written to {args.out})")
+    return metrics
+
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(
+        description='Train a tg_intrinsic classification network.')
+    parser.add_argument('--model', default='deltanet', choices=['deltanet'])
+    parser.add_argument('--dataset', default='synthetic_modelnet',
+                        choices=DATASETS)
+    parser.add_argument('--root', default='data',
+                        help='cache folder of the synthetic data sets')
+    parser.add_argument('--mesh-root', default=None,
+                        help='root/<class>/<split>/*.off|obj|ply for '
+                        'mesh_folder')
+    parser.add_argument('--out', default=None,
+                        help='output folder (default: runs/<model>_<dataset>)')
+    parser.add_argument('--num-points', type=int, default=1024)
+    parser.add_argument('--shapes-per-class', type=int, default=None,
+                        help='shrink the synthetic sets (quick runs)')
+    parser.add_argument('--epochs', type=int, default=50)
+    parser.add_argument('--batch-size', type=int, default=16)
+    parser.add_argument('--lr', type=float, default=1e-3)
+    parser.add_argument('--weight-decay', type=float, default=1e-4)
+    parser.add_argument('--label-smoothing', type=float, default=0.0)
+    parser.add_argument('--eval-every', type=int, default=5)
+    parser.add_argument('--conv-channels', type=int, nargs='+',
+                        default=[64, 64, 128, 256])
+    parser.add_argument('--k', type=int, default=20)
+    parser.add_argument('--no-vector-stream', action='store_true',
+                        help='ablation: drop the vector stream')
+    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--data-seed', type=int, default=0)
+    parser.add_argument('--device', default='auto')
+    parser.add_argument('--threads', type=int, default=0)
+    parser.add_argument('--resume', action='store_true')
+    parser.add_argument('--quiet', action='store_true',
+                        help='no progress bar')
+    args = parser.parse_args(argv)
+    if args.out is None:
+        args.out = os.path.join('runs', f'{args.model}_{args.dataset}')
+    for name in ('num_points', 'epochs', 'batch_size', 'eval_every', 'k'):
+        if getattr(args, name) < 1:
+            parser.error(f"--{name.replace('_', '-')} must be at least 1")
+    return args
+
+
+def main(argv=None):
+    return train(parse_args(argv))
+
+
+if __name__ == '__main__':
+    main()

@@ -8,7 +8,7 @@ TORCH_INSTALL ?= pip install torch==2.13.0
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test benchmarks clean
+.PHONY: install demo test train benchmarks clean
 
 $(STAMP): setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -21,6 +21,9 @@ install: $(STAMP)
 
 demo: $(STAMP)
 	$(BIN)/python -m tg_intrinsic.demo
+
+train: $(STAMP)
+	$(BIN)/python -m tg_intrinsic.train $(ARGS)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q tests

@@ -171,7 +171,7 @@ def train(args) -> Dict:
             loss.backward()
             optimizer.step()
             n = batch.y.numel()
-            loss_sum += float(loss) * n
+            loss_sum += float(loss.detach()) * n
             correct += int((out.argmax(-1) == batch.y.view(-1)).sum())
             seen += n
             bar.set_postfix(loss=f'{loss_sum / seen:.3f}')

@@ -229,3 +229,23 @@ def test_delta_conv_matches_paper_formula(kwargs):
     # The generic path (no shared operators graph) agrees as well.
     out2, _ = conv(x, v, ei.clone(), ops)
     assert torch.allclose(out2, ref, rtol=1e-10, atol=1e-10)
+
+
+def test_degenerate_clouds_give_errors_or_finite_outputs():
+    model = DeltaNetClassification(3, 4, k=12).eval()
+    g = torch.Generator().manual_seed(0)
+    # A flat patch without normals: normals are estimated (documented).
+    flat = torch.cat([torch.rand(200, 2, generator=g), torch.zeros(200, 1)],
+                     1)
+    out = model(Batch.from_data_list([Data(pos=flat)]))
+    assert torch.isfinite(out).all()
+    # Coincident points with normals given: the fit stays finite.
+    dup = torch.cat([flat, flat[:50]])
+    normal = torch.tensor([[0., 0, 1]]).expand(250, 3)
+    out = model(Batch.from_data_list([Data(pos=dup, normal=normal)]))
+    assert torch.isfinite(out).all()
+    # A line has no tangent plane to estimate: a clear error.
+    line = torch.stack([torch.linspace(0, 1, 100), torch.zeros(100),
+                        torch.zeros(100)], 1)
+    with pytest.raises(ValueError, match='degenerate'):
+        model(Batch.from_data_list([Data(pos=line)]))

@@ -12,6 +12,8 @@ from .mesh import (face_areas, face_normals, vertex_normals, lumped_mass,
                    edge_face_counts, is_closed_manifold,
                    remove_unreferenced_vertices, normalize_area)
 from .sparse import to_scipy, from_scipy
+from .mls import mls_grad_div, build_mls_operators
+from .operators import SurfaceOperators
 
 __all__ = [
     'knn',
@@ -32,4 +34,7 @@ __all__ = [
     'normalize_area',
     'to_scipy',
     'from_scipy',
+    'mls_grad_div',
+    'build_mls_operators',
+    'SurfaceOperators',
 ]

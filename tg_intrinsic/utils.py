@@ -17,6 +17,10 @@ def _atomic(path: str, write, mode: str):
     try:
         with os.fdopen(fd, mode) as f:
             write(f)
+        # mkstemp creates 0600 files; give the result the usual permissions.
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

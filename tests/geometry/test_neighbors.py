@@ -604,7 +604,8 @@ def test_property_malformed_inputs(data, k, loop, fn, dense, r, ratio):
         return
     assert int(out[0].min()) >= 0 and int(out[0].max()) < num
     if fn == 'knn_query':
-        qb = torch.zeros(3, dtype=torch.long) if batch is None else b[:3]
+        qb = torch.zeros(min(3, num), dtype=torch.long) if batch is None \
+            else b[:3]
         assert torch.equal(b[out[0]], qb[out[1]])
         check_knn(out, x, k, b, query=x[:3], query_batch=qb, exact=False)
     else:

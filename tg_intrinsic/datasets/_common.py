@@ -1,5 +1,16 @@
 """Helpers shared by the datasets (private)."""
 import numpy as np
+from torch_geometric.data import InMemoryDataset
+
+
+class GeneratedDataset(InMemoryDataset):
+    """An InMemoryDataset made in ``process()``: no raw files, no download."""
+    @property
+    def raw_file_names(self):
+        return []
+
+    def download(self):
+        pass
 
 
 def check_split(split):

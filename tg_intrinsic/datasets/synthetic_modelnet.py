@@ -3,17 +3,17 @@ from typing import Callable, Optional, Tuple
 
 import numpy as np
 import torch
-from torch_geometric.data import InMemoryDataset
 from tqdm.auto import tqdm
 
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry.neighbors import fps
 
 from . import _modelnet_shapes as shapes
-from ._common import check_int, check_split, fmt, save_atomic, shape_rng
+from ._common import (GeneratedDataset, check_int, check_split, fmt,
+                      save_atomic, shape_rng)
 
 
-class SyntheticModelNet(InMemoryDataset):
+class SyntheticModelNet(GeneratedDataset):
     r"""A synthetic, ModelNet-style dataset of rigid man-made objects as
     point clouds with normals, for point-cloud classification (the
     setting of "DeltaConv: anisotropic operators for geometric deep
@@ -130,13 +130,6 @@ class SyntheticModelNet(InMemoryDataset):
                          force_reload=force_reload)
         self.load(self.processed_paths[0 if split == 'train' else 1],
                   data_cls=IntrinsicData)
-
-    @property
-    def raw_file_names(self):
-        return []
-
-    def download(self):
-        pass
 
     @property
     def tag(self) -> str:

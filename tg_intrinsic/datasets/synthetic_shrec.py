@@ -3,16 +3,16 @@ import os.path as osp
 from typing import Callable, Optional, Tuple
 
 import torch
-from torch_geometric.data import InMemoryDataset
 from tqdm.auto import tqdm
 
 from tg_intrinsic.data import IntrinsicData
 
 from . import _shrec_shapes as shapes
-from ._common import check_int, check_split, fmt, save_atomic, shape_rng
+from ._common import (GeneratedDataset, check_int, check_split, fmt,
+                      save_atomic, shape_rng)
 
 
-class SyntheticSHREC(InMemoryDataset):
+class SyntheticSHREC(GeneratedDataset):
     r"""A synthetic, SHREC'11-style dataset of non-rigid, articulated
     closed surfaces for mesh classification and part segmentation, as used
     to evaluate Harmonic Surface Networks ("CNNs on surfaces using
@@ -160,13 +160,6 @@ class SyntheticSHREC(InMemoryDataset):
                   data_cls=IntrinsicData)
 
     # ------------------------------------------------------------------
-    @property
-    def raw_file_names(self):
-        return []
-
-    def download(self):
-        pass
-
     @property
     def tag(self) -> str:
         """Generation parameters, as they appear in the processed files."""

@@ -249,3 +249,29 @@ def test_degenerate_clouds_give_errors_or_finite_outputs():
                         torch.zeros(100)], 1)
     with pytest.raises(ValueError, match='degenerate'):
         model(Batch.from_data_list([Data(pos=line)]))
+
+
+@pytest.mark.parametrize('train', [False, True])
+def test_centralized_layer_in_linear_time_matches_per_edge(train):
+    torch.manual_seed(0)
+    pos, normal = blob(150)
+    ei, ops = operators(pos, tangent_frames(normal), k=10)
+    conv = DeltaConv(4, 6, centralized=True).double().train(train)
+    for p in conv.parameters():
+        torch.nn.init.normal_(p)  # negative BN scales included
+    bn = conv.mlp_neighbors.norms[0].module
+    bn.running_mean.normal_()
+    bn.running_var.uniform_(0.5, 2.0)
+    x = torch.randn(150, 4, dtype=torch.float64, requires_grad=True)
+    ref_conv = DeltaConv(4, 6, centralized=True).double().train(train)
+    ref_conv.load_state_dict(conv.state_dict())
+    out = conv._centralized_max(x, ops)
+    j, i = ops.edge_index
+    ref = ops.edge_max(ref_conv.mlp_neighbors(x[j] - x[i]))
+    assert torch.allclose(out, ref, rtol=1e-9, atol=1e-9)
+    ref_bn = ref_conv.mlp_neighbors.norms[0].module
+    assert torch.allclose(bn.running_mean, ref_bn.running_mean)
+    assert torch.allclose(bn.running_var, ref_bn.running_var)
+    g1, = torch.autograd.grad(out.square().sum(), x)
+    g2, = torch.autograd.grad(ref.square().sum(), x)
+    assert torch.allclose(g1, g2, rtol=1e-8, atol=1e-9)

@@ -182,6 +182,7 @@ class SurfaceOperators:
         count_j = torch.bincount(j, minlength=n)
         self.G_t = _block_cols(j[by_j], i[by_j], grad_weight[by_j], count_j,
                                n)
+        self.out_degree = count_j
         self.D_t = _block_rows(j[by_j], i[by_j], div_weight[by_j], count_j, n)
 
     def grad(self, x: Tensor) -> Tensor:
@@ -252,6 +253,17 @@ class SurfaceOperators:
         if empty is not None and bool(empty.any()):
             out = out.masked_fill(empty, 0.0)
         return out
+
+    def neighbor_sum(self, x: Tensor) -> Tensor:
+        r""":math:`\sum_{j \in \mathcal{N}(i)} x_j` over the graph."""
+        if not hasattr(self, 'A'):
+            j = self.edge_index[0]
+            ones = torch.ones(j.numel(), dtype=x.dtype, device=x.device)
+            self.A = torch.sparse_csr_tensor(self.crow, j, ones,
+                                             (self.num_nodes, self.num_nodes),
+                                             check_invariants=False)
+            self.A_t = self.A.t().to_sparse_csr()
+        return _SparseMM.apply(self.A.to(x.dtype), self.A_t.to(x.dtype), x)
 
     def edge_max(self, values: Tensor) -> Tensor:
         r"""Per centre, the maximum of per-edge values given in the order of

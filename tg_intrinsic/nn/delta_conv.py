@@ -143,7 +143,9 @@ class DeltaConv(MessagePassing):
         out = self.post_scalar(out)
         fast = operators is not None and \
             edge_index is operators.source_edge_index
-        if self.centralized and fast:  # a per-edge MLP, then the maximum
+        if self.centralized and fast and self.depth == 1:
+            x_max = self._centralized_max(x, operators)
+        elif self.centralized and fast:  # a per-edge MLP, then the maximum
             j, i = operators.edge_index
             x_max = operators.edge_max(self.mlp_neighbors(x[j] - x[i]))
         elif self.centralized:
@@ -156,6 +158,41 @@ class DeltaConv(MessagePassing):
             x_max = self.propagate(edge_index, x=self.mlp_neighbors(x))
         out = out + x_max
         return out, (v if self.lin_vector is not None else None)
+
+    def _centralized_max(self, x: Tensor,
+                         operators: SurfaceOperators) -> Tensor:
+        r""":math:`\max_j \sigma(\mathrm{BN}(W (x_j - x_i)))` in
+        :math:`O(N C)`: with :math:`u = W x`, the batch-norm statistics over
+        the edges follow from per-point neighbour sums of :math:`u` and
+        :math:`u^2`, and since BN is affine per channel and the activation
+        increasing, the maximum moves inside: it is taken over
+        :math:`u_j` (or the minimum, where the BN scale is negative)."""
+        bn = self.mlp_neighbors.norms[0].module
+        u = self.mlp_neighbors.lins[0](x)
+        if bn.training or not bn.track_running_stats:
+            num_edges = operators.edge_index.size(1)
+            in_degree = operators.crow.diff().to(u.dtype)
+            out_degree = operators.out_degree.to(u.dtype)
+            mean = (out_degree - in_degree) @ u / num_edges
+            square = ((out_degree + in_degree) @ (u * u)
+                      - 2 * (u * operators.neighbor_sum(u)).sum(0))
+            var = square / num_edges - mean * mean
+            if bn.training and bn.track_running_stats:
+                with torch.no_grad():
+                    bn.num_batches_tracked.add_(1)
+                    momentum = bn.momentum if bn.momentum is not None \
+                        else 1.0 / float(bn.num_batches_tracked)
+                    unbiased = var * num_edges / max(num_edges - 1, 1)
+                    bn.running_mean.mul_(1 - momentum).add_(momentum * mean)
+                    bn.running_var.mul_(1 - momentum).add_(
+                        momentum * unbiased)
+        else:
+            mean, var = bn.running_mean, bn.running_var
+        scale = bn.weight / torch.sqrt(var + bn.eps)
+        shift = bn.bias - scale * mean
+        extreme = torch.where(scale >= 0, operators.neighbor_max(u),
+                              -operators.neighbor_max(-u))
+        return self.mlp_neighbors.act(scale * (extreme - u) + shift)
 
     def message(self, x_j: Tensor) -> Tensor:
         return x_j

@@ -13,7 +13,6 @@ Run with ``python -m tg_intrinsic.demo [--root data] [--out runs/demo]``. It
 and writes ``summary.json`` to ``--out``.
 """
 import argparse
-import json
 import os
 import time
 

@@ -5,7 +5,7 @@ import pytest
 import robust_laplacian
 import torch
 
-from tg_intrinsic.geometry import (cotan_laplacian, cotan_weights,
+from tg_intrinsic.geometry import (cotan_laplacian,
                                    edge_face_counts, face_areas, face_normals,
                                    from_scipy, is_closed_manifold,
                                    lumped_mass, mesh_edges, normalize_area,

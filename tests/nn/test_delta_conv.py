@@ -5,7 +5,7 @@ import torch
 from torch_geometric.data import Batch, Data
 
 from tg_intrinsic.geometry import knn, tangent_frames
-from tg_intrinsic.geometry.mls import build_mls_operators, mls_grad_div
+from tg_intrinsic.geometry.mls import mls_grad_div
 from tg_intrinsic.geometry.operators import SurfaceOperators, rotate_j
 from tg_intrinsic.nn import DeltaConv, VectorLinear, VectorMLP, VectorNonLin
 from tg_intrinsic.nn.models import (DeltaNetClassification,

@@ -22,7 +22,7 @@ derived operators are
     \Delta_H = -(G D - J G D J).
 """
 import warnings
-from typing import Optional, Tuple
+from typing import Optional
 
 import numpy as np
 import torch
@@ -276,8 +276,11 @@ class SurfaceOperators:
                                   'amax', include_self=False)
 
     def to(self, device) -> 'SurfaceOperators':
-        for name in ('G', 'D', 'G_t', 'D_t', 'edge_index', 'crow'):
+        for name in ('G', 'D', 'G_t', 'D_t', 'edge_index', 'crow',
+                     'out_degree'):
             setattr(self, name, getattr(self, name).to(device))
+        for name in ('A', 'A_t'):  # rebuilt on demand by neighbor_sum
+            self.__dict__.pop(name, None)
         return self
 
     def __repr__(self) -> str:

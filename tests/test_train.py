@@ -57,3 +57,12 @@ def test_training_on_a_mesh_folder(tmp_path):
                     '--quiet'])
     assert metrics['dataset'] == 'mesh_folder'
     assert len(metrics['history']) == 1
+
+
+def test_rotation_augmentation_and_sgd(tmp_path):
+    metrics = run(tmp_path, '--epochs', '1', '--rotate', '--optimizer', 'sgd',
+                  '--lr', '0.05')
+    assert metrics['args']['rotate'] and metrics['args']['optimizer'] == 'sgd'
+    assert len(metrics['history']) == 1
+    state = torch.load(tmp_path / 'run' / 'checkpoint.pt', weights_only=False)
+    assert 'momentum' in state['optimizer']['param_groups'][0]

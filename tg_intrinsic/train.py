@@ -122,12 +122,19 @@ def train(args) -> Dict:
                                          args.num_points, args.mesh_root,
                                          args.data_seed,
                                          args.shapes_per_class)
-    augment = RandomScale((2 / 3, 3 / 2))
-    train_set.transform = Compose([t for t in (train_set.transform, augment)
-                                   if t is not None])
+    from tg_intrinsic.transforms import RandomRotation
+    augment = [train_set.transform, RandomScale((2 / 3, 3 / 2))]
+    if args.rotate:
+        augment.append(RandomRotation())
+    train_set.transform = Compose([t for t in augment if t is not None])
     model = build_model(args.model, train_set.num_classes, args).to(device)
-    optimizer = torch.optim.Adam(model.parameters(), lr=args.lr,
-                                 weight_decay=args.weight_decay)
+    if args.optimizer == 'sgd':
+        optimizer = torch.optim.SGD(model.parameters(), lr=args.lr,
+                                    momentum=0.9,
+                                    weight_decay=args.weight_decay)
+    else:
+        optimizer = torch.optim.Adam(model.parameters(), lr=args.lr,
+                                     weight_decay=args.weight_decay)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(
         optimizer, T_max=args.epochs, eta_min=args.lr / 100)
     os.makedirs(args.out, exist_ok=True)
@@ -225,6 +232,9 @@ def parse_args(argv=None):
                         help='shrink the synthetic sets (quick runs)')
     parser.add_argument('--epochs', type=int, default=50)
     parser.add_argument('--batch-size', type=int, default=16)
+    parser.add_argument('--optimizer', default='adam',
+                        choices=['adam', 'sgd'],
+                        help='sgd uses momentum 0.9')
     parser.add_argument('--lr', type=float, default=1e-3)
     parser.add_argument('--weight-decay', type=float, default=1e-4)
     parser.add_argument('--label-smoothing', type=float, default=0.0)
@@ -232,6 +242,9 @@ def parse_args(argv=None):
     parser.add_argument('--conv-channels', type=int, nargs='+',
                         default=[64, 64, 128, 256])
     parser.add_argument('--k', type=int, default=20)
+    parser.add_argument('--rotate', action='store_true',
+                        help='augment training shapes with random rotations '
+                        '(uniform on SO(3)), for data in arbitrary poses')
     parser.add_argument('--no-vector-stream', action='store_true',
                         help='ablation: drop the vector stream')
     parser.add_argument('--seed', type=int, default=0)

@@ -92,3 +92,23 @@ def test_tangent_frames_bad_input():
         tangent_frames(torch.zeros(2, 3))
     with pytest.raises(ValueError, match=r'\[N, 3\]'):
         tangent_frames(torch.ones(3))
+
+
+@pytest.mark.parametrize('shape', ['cloud', 'plane', 'anisotropic'])
+def test_compiled_pca_matches_torch_eigh(shape):
+    from tg_intrinsic.geometry.frames import _pca_numba, _pca_torch
+    from tg_intrinsic.geometry.neighbors import knn
+    gen = torch.Generator().manual_seed(0)
+    pos = torch.randn(1500, 3, dtype=torch.float64, generator=gen)
+    if shape == 'plane':  # far from the origin: tests the centring
+        pos[:, 2] = 0
+        pos = pos * 1e3 + 5
+    elif shape == 'anisotropic':
+        pos = pos * torch.tensor([1.0, 1e-2, 1e-5], dtype=torch.float64)
+    neighbours = knn(pos, 10, loop=False)[0].view(-1, 10)
+    evals, normal = _pca_numba(pos.numpy(), neighbours.numpy())
+    ref_evals, ref_normal = _pca_torch(pos, neighbours)
+    scale = ref_evals[:, 2:].abs()
+    assert ((torch.from_numpy(evals) - ref_evals).abs() <= 1e-12 * scale).all()
+    cosine = (torch.from_numpy(normal) * ref_normal).sum(-1).abs()
+    assert (cosine > 1 - 1e-9).all()

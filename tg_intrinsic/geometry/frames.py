@@ -4,7 +4,7 @@ from typing import Optional
 import numpy as np
 import scipy.sparse as sp
 import torch
-from numba import njit
+from numba import njit, prange
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 from torch import Tensor
 
@@ -60,10 +60,12 @@ def estimate_normals(pos: Tensor, k: int = 10,
     # knn returns exactly k neighbours per centre, grouped by centre.
     neighbours = edge_index[0].view(-1, k)
     pos64 = pos.double()
-    patch = torch.cat([pos64.unsqueeze(1), pos64[neighbours]], dim=1)
-    centred = patch - patch.mean(dim=1, keepdim=True)
-    cov = centred.transpose(1, 2) @ centred / (k + 1)
-    evals, evecs = torch.linalg.eigh(cov)  # ascending eigenvalues
+    if pos.device.type == 'cpu':
+        evals, normal = _pca_numba(pos64.contiguous().numpy(),
+                                   neighbours.contiguous().numpy())
+        evals, normal = torch.from_numpy(evals), torch.from_numpy(normal)
+    else:
+        evals, normal = _pca_torch(pos64, neighbours)
     tol = 1e3 * torch.finfo(torch.float64).eps
     degenerate = evals[:, 1] <= tol * evals[:, 2].clamp_min(
         torch.finfo(torch.float64).tiny)
@@ -74,10 +76,77 @@ def estimate_normals(pos: Tensor, k: int = 10,
                          f"{k + 1} points coincide or lie on a line, so no "
                          f"tangent plane can be fitted; remove duplicate "
                          f"points or increase k")
-    normal = evecs[:, :, 0]
     if orient:
         normal = _orient(pos64, normal, edge_index)
     return normal.to(pos.dtype)
+
+
+def _pca_torch(pos: Tensor, neighbours: Tensor):
+    """Ascending covariance eigenvalues and the normal (eigenvector of the
+    smallest one) of every patch; the reference for :func:`_pca_numba`."""
+    patch = torch.cat([pos.unsqueeze(1), pos[neighbours]], dim=1)
+    centred = patch - patch.mean(dim=1, keepdim=True)
+    cov = centred.transpose(1, 2) @ centred / patch.size(1)
+    evals, evecs = torch.linalg.eigh(cov)
+    return evals, evecs[:, :, 0]
+
+
+@njit(cache=True, parallel=True)
+def _pca_numba(pos, neighbours):  # pragma: no cover (numba)
+    """Covariance of every patch and its eigen-decomposition by cyclic
+    Jacobi rotations (exact to rounding for 3 x 3), parallel over points."""
+    num, k = neighbours.shape
+    evals = np.empty((num, 3))
+    normal = np.empty((num, 3))
+    for i in prange(num):
+        mean = pos[i].copy()
+        for a in range(k):
+            mean += pos[neighbours[i, a]]
+        mean /= k + 1
+        d = pos[i] - mean
+        c = np.outer(d, d)
+        for a in range(k):
+            d = pos[neighbours[i, a]] - mean
+            for r in range(3):
+                for s in range(3):
+                    c[r, s] += d[r] * d[s]
+        c /= k + 1
+        v = np.eye(3)
+        for _ in range(50):
+            off = c[0, 1] ** 2 + c[0, 2] ** 2 + c[1, 2] ** 2
+            if off <= 1e-30 * (c[0, 0] ** 2 + c[1, 1] ** 2 + c[2, 2] ** 2) \
+                    or off == 0.0:
+                break
+            for p in range(2):
+                for q in range(p + 1, 3):
+                    if c[p, q] == 0.0:
+                        continue
+                    theta = (c[q, q] - c[p, p]) / (2.0 * c[p, q])
+                    t = np.sign(theta) / (abs(theta)
+                                          + np.sqrt(theta * theta + 1.0))
+                    if theta == 0.0:
+                        t = 1.0
+                    cs = 1.0 / np.sqrt(t * t + 1.0)
+                    sn = t * cs
+                    for r in range(3):  # c <- c G
+                        a_rp, a_rq = c[r, p], c[r, q]
+                        c[r, p] = cs * a_rp - sn * a_rq
+                        c[r, q] = sn * a_rp + cs * a_rq
+                    for r in range(3):  # c <- G^T c
+                        a_pr, a_qr = c[p, r], c[q, r]
+                        c[p, r] = cs * a_pr - sn * a_qr
+                        c[q, r] = sn * a_pr + cs * a_qr
+                    for r in range(3):  # v <- v G
+                        v_rp, v_rq = v[r, p], v[r, q]
+                        v[r, p] = cs * v_rp - sn * v_rq
+                        v[r, q] = sn * v_rp + cs * v_rq
+        order = np.argsort(np.array([c[0, 0], c[1, 1], c[2, 2]]))
+        for r in range(3):
+            evals[i, r] = c[order[r], order[r]]
+        lo = order[0]
+        for r in range(3):
+            normal[i, r] = v[r, lo]
+    return evals, normal
 
 
 def _orient(pos: Tensor, normal: Tensor, edge_index: Tensor) -> Tensor:

@@ -3,5 +3,6 @@ r"""Data transforms: read a :class:`~torch_geometric.data.Data`, call
 from .estimate_normals import EstimateNormals
 from .tangent_frames import TangentFrames
 from .mls_operators import MLSOperators
+from .random_rotation import RandomRotation
 
-__all__ = ['EstimateNormals', 'TangentFrames', 'MLSOperators']
+__all__ = ['EstimateNormals', 'TangentFrames', 'MLSOperators', 'RandomRotation']

@@ -1,0 +1,59 @@
+import pytest
+import torch
+from torch_geometric.data import Data
+
+from tg_intrinsic.transforms import MLSOperators, RandomRotation
+from tg_intrinsic.transforms.random_rotation import random_rotation_matrix
+
+
+@pytest.mark.parametrize('axis', [None, 'x', 'y', 'z'])
+def test_matrices_are_rotations(axis):
+    gen = torch.Generator().manual_seed(0)
+    for _ in range(20):
+        r = random_rotation_matrix(axis, gen)
+        assert torch.allclose(r @ r.T, torch.eye(3, dtype=r.dtype),
+                              atol=1e-12)
+        assert abs(float(torch.linalg.det(r)) - 1) < 1e-12
+        if axis is not None:  # the axis itself is fixed
+            e = torch.zeros(3, dtype=r.dtype)
+            e['xyz'.index(axis)] = 1
+            assert torch.allclose(r @ e, e)
+
+
+def test_so3_rotations_are_uniform():
+    # Under the Haar measure E[R] = 0 and E[R_ij^2] = 1/3; a rotation about
+    # a fixed axis (or a biased sampler) violates both.
+    gen = torch.Generator().manual_seed(1)
+    rs = torch.stack([random_rotation_matrix(None, gen) for _ in range(4000)])
+    assert rs.mean(0).abs().max() < 0.05
+    assert ((rs ** 2).mean(0) - 1 / 3).abs().max() < 0.03
+
+
+def test_points_normals_frames_and_operators_turn_together():
+    # random points: a regular sphere has tied neighbour distances
+    pos = torch.randn(300, 3, dtype=torch.float64,
+                      generator=torch.Generator().manual_seed(2))
+    pos = pos / pos.norm(dim=-1, keepdim=True)
+    normal = pos.clone()
+    data = MLSOperators(k=10)(Data(pos=pos, normal=normal))
+    torch.manual_seed(3)
+    out = RandomRotation()(data)
+    assert torch.equal(data.pos, pos)  # input not mutated
+    r = torch.linalg.lstsq(pos, out.pos).solution.T
+    assert torch.allclose(r @ r.T, torch.eye(3, dtype=r.dtype), atol=1e-10)
+    assert torch.allclose(out.normal, normal @ r.T, atol=1e-12)
+    assert torch.allclose(out.frame, data.frame @ r.T, atol=1e-12)
+    # The stored intrinsic operators equal those rebuilt on the rotated
+    # cloud in the rotated frames.
+    rebuilt = MLSOperators(k=10)(Data(pos=out.pos, frame=out.frame))
+    assert torch.equal(rebuilt.edge_index, out.edge_index)
+    assert torch.allclose(rebuilt.grad_weight, out.grad_weight, atol=1e-9)
+    assert torch.allclose(rebuilt.div_weight, out.div_weight, atol=1e-9)
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match="axis must be"):
+        RandomRotation(axis='w')
+    with pytest.raises(ValueError, match=r"data.pos' of shape \[N, 3\]"):
+        RandomRotation()(Data(pos=torch.zeros(4, 2)))
+    assert repr(RandomRotation('z')) == "RandomRotation(axis='z')"

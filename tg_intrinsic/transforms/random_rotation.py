@@ -1,0 +1,86 @@
+import math
+from typing import Optional
+
+import torch
+from torch import Tensor
+from torch_geometric.data import Data
+from torch_geometric.data.datapipes import functional_transform
+from torch_geometric.transforms import BaseTransform
+
+_AXES = {'x': 0, 'y': 1, 'z': 2}
+
+
+def random_rotation_matrix(axis: Optional[str] = None,
+                           generator: Optional[torch.Generator] = None,
+                           dtype=torch.float64) -> Tensor:
+    """A rotation drawn uniformly from SO(3) (``axis=None``, from a random
+    unit quaternion) or about one coordinate axis."""
+    if axis is None:
+        q = torch.randn(4, generator=generator, dtype=torch.float64)
+        w, x, y, z = (q / q.norm()).tolist()
+        matrix = torch.tensor([
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ], dtype=torch.float64)
+        return matrix.to(dtype)
+    angle = float(torch.rand(1, generator=generator, dtype=torch.float64))
+    c, s = math.cos(2 * math.pi * angle), math.sin(2 * math.pi * angle)
+    i = _AXES[axis]
+    j, k = [a for a in range(3) if a != i]
+    matrix = torch.eye(3, dtype=torch.float64)
+    matrix[j, j], matrix[j, k], matrix[k, j], matrix[k, k] = c, -s, s, c
+    return matrix.to(dtype)
+
+
+@functional_transform('random_rotation')
+class RandomRotation(BaseTransform):
+    r"""Rotates a shape rigidly by a random rotation :math:`R`, uniform on
+    SO(3) or about one axis (functional name: :obj:`random_rotation`).
+
+    .. math::
+        \mathbf{p}_i \mapsto R\,\mathbf{p}_i, \quad
+        \mathbf{n}_i \mapsto R\,\mathbf{n}_i, \quad
+        (e_u, e_v, n)_i \mapsto (R e_u, R e_v, R n)_i
+
+    Unlike PyG's :class:`~torch_geometric.transforms.RandomRotate`, normals
+    (``normal`` or ``norm``) and tangent frames (``frame``) turn with the
+    points. Because the frames turn too, per-edge operators that are
+    intrinsic to the surface (``grad_weight``, ``div_weight`` of
+    :class:`MLSOperators`) stay valid and are kept.
+
+    Args:
+        axis (str, optional): :obj:`'x'`, :obj:`'y'` or :obj:`'z'` to rotate
+            about that axis only; :obj:`None` for all of SO(3).
+            (default: :obj:`None`)
+
+    Shapes:
+        - **input:** ``pos`` :math:`(N, 3)`, optional ``normal`` / ``norm``
+          :math:`(N, 3)`, ``frame`` :math:`(N, 3, 3)`
+        - **output:** the same attributes, rotated
+    """
+    def __init__(self, axis: Optional[str] = None):
+        if axis is not None and axis not in _AXES:
+            raise ValueError(f"axis must be None, 'x', 'y' or 'z' (got "
+                             f"{axis!r})")
+        self.axis = axis
+
+    def forward(self, data: Data) -> Data:
+        pos = getattr(data, 'pos', None)
+        if pos is None or pos.dim() != 2 or pos.size(-1) != 3:
+            raise ValueError("RandomRotation needs 'data.pos' of shape "
+                             "[N, 3]")
+        data = data.clone()
+        matrix = random_rotation_matrix(self.axis).to(pos.device, pos.dtype)
+        data.pos = pos @ matrix.T
+        for key in ('normal', 'norm'):
+            value = getattr(data, key, None)
+            if isinstance(value, Tensor) and value.shape == pos.shape:
+                data[key] = value @ matrix.T
+        frame = getattr(data, 'frame', None)
+        if isinstance(frame, Tensor):
+            data.frame = frame @ matrix.T
+        return data
+
+    def __repr__(self) -> str:
+        return f'{self.__class__.__name__}(axis={self.axis!r})'

@@ -18,7 +18,10 @@ extras_require = {
         'pytest>=7',
         'hypothesis>=6.80',
         'robust-laplacian>=0.2.7',
+        'potpourri3d>=1.0',
     ],
+    # log_map(method='vector_heat'): geometry-central's vector heat method.
+    'heat': ['potpourri3d>=1.0'],
     # Optional compiled scatter kernels; results must not change with it.
     'scatter': ['torch-scatter'],
 }

@@ -66,3 +66,42 @@ def test_rotation_augmentation_and_sgd(tmp_path):
     assert len(metrics['history']) == 1
     state = torch.load(tmp_path / 'run' / 'checkpoint.pt', weights_only=False)
     assert 'momentum' in state['optimizer']['param_groups'][0]
+
+
+@pytest.fixture(scope='module')
+def shrec_root(tmp_path_factory):
+    return tmp_path_factory.mktemp('shrec')  # generated once for both tasks
+
+
+@pytest.mark.parametrize('task', ['classification', 'segmentation'])
+def test_hsn_training_on_synthetic_shrec(tmp_path, shrec_root, task):
+    metrics = main(['--model', 'hsn', '--task', task, '--dataset',
+                    'synthetic_shrec', '--root', str(shrec_root),
+                    '--out', str(tmp_path / 'run'), '--shapes-per-class',
+                    '2', '--num-vertices', '120', '160', '--hsn-channels',
+                    '4', '8', '--rings', '3', '--radius', '0.3', '--epochs',
+                    '1', '--batch-size', '4', '--rotate', '--quiet'])
+    assert len(metrics['history']) == 1
+    assert 0.0 <= metrics['final_test_accuracy'] <= 1.0
+    assert (tmp_path / 'run' / 'checkpoint.pt').exists()
+
+
+def test_hsn_training_on_a_mesh_folder(tmp_path):
+    import trimesh
+    for name, scale in (('ball', (1, 1, 1)), ('cigar', (3, 1, 1))):
+        for split in ('train', 'test'):
+            folder = tmp_path / 'meshes' / name / split
+            folder.mkdir(parents=True)
+            for i in range(2):
+                mesh = trimesh.creation.icosphere(2)
+                mesh.apply_scale(scale)
+                mesh.export(folder / f'{name}_{i}.off')
+    metrics = main(['--model', 'hsn', '--dataset', 'mesh_folder',
+                    '--mesh-root', str(tmp_path / 'meshes'), '--out',
+                    str(tmp_path / 'run'), '--hsn-channels', '4', '8',
+                    '--rings', '3', '--radius', '0.25', '--epochs', '1',
+                    '--batch-size', '2', '--quiet'])
+    assert metrics['dataset'] == 'mesh_folder'
+    with pytest.raises(ValueError, match='works on meshes'):
+        main(['--model', 'hsn', '--dataset', 'synthetic_modelnet', '--out',
+              str(tmp_path / 'x'), '--quiet'])

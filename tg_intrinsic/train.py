@@ -1,16 +1,24 @@
-"""Train a classification network on the synthetic data sets or your own.
+"""Train DeltaNet (point clouds sampled from the shapes) or a Harmonic
+Surface Network (on the mesh vertices) on the synthetic data sets or your
+own.
 
 Examples::
 
     python -m tg_intrinsic.train --dataset synthetic_modelnet --epochs 30
     python -m tg_intrinsic.train --dataset synthetic_shrec --num-points 1024
     python -m tg_intrinsic.train --dataset mesh_folder --mesh-root ModelNet10
+    python -m tg_intrinsic.train --model hsn --dataset synthetic_shrec \
+        --num-vertices 300 500 --rotate --lr 1e-2
+    python -m tg_intrinsic.train --model hsn --task segmentation \
+        --dataset synthetic_shrec
 
 Writes to ``--out``: ``checkpoint.pt`` (model, optimiser, schedule, history;
 written atomically at every evaluation, so ``--resume`` continues an
 interrupted run), ``metrics.json`` and ``learning_curve.png``.
 """
 import argparse
+import hashlib
+import json
 import os
 import time
 from typing import Dict, List, Optional
@@ -25,6 +33,7 @@ from tqdm import tqdm
 from tg_intrinsic.utils import atomic_torch_save, atomic_write_json
 
 DATASETS = ('synthetic_modelnet', 'synthetic_shrec', 'mesh_folder')
+MODELS = ('deltanet', 'hsn')
 
 
 def build_datasets(name: str, root: str, num_points: int,
@@ -66,13 +75,83 @@ def build_datasets(name: str, root: str, num_points: int,
     raise ValueError(f"unknown dataset {name!r}; choose one of {DATASETS}")
 
 
+def hsn_pipeline(args):
+    """Mesh -> unit area, frames, geodesic discs with log map and
+    transport on two levels, harmonic precomputation (Harmonic Surface
+    Networks' setting: radii 0.2 and 0.4 on unit area, a quarter of the
+    points on level 1)."""
+    from tg_intrinsic.transforms import (HarmonicPrecompute, LogMap,
+                                         MultiscaleSupports, NormalizeArea)
+    # LogMap writes the transport angles too (same solve).
+    return Compose([NormalizeArea(),
+                    LogMap(args.radius, method=args.logmap_method),
+                    MultiscaleSupports([0.25], [2 * args.radius],
+                                       method=args.logmap_method),
+                    HarmonicPrecompute(args.rings, args.max_order)])
+
+
+def build_mesh_datasets(args):
+    """Train and test lists of precomputed meshes for HSN (the vertices are
+    the points). The precomputation is cached under ``root/hsn_cache``,
+    keyed by the data set and every setting it depends on."""
+    from tg_intrinsic.datasets import MeshFolder, SyntheticSHREC
+    if args.dataset == 'synthetic_shrec':
+        kwargs = dict(seed=args.data_seed, task=args.task)
+        if args.num_vertices is not None:
+            kwargs['num_vertices'] = tuple(args.num_vertices)
+        if args.shapes_per_class is not None:
+            kwargs.update(num_per_class=args.shapes_per_class,
+                          num_train_per_class=max(
+                              1, args.shapes_per_class // 2))
+        path = os.path.join(args.root, 'SyntheticSHREC')
+        sets = [SyntheticSHREC(path, split, **kwargs)
+                for split in ('train', 'test')]
+    elif args.dataset == 'mesh_folder':
+        if args.mesh_root is None:
+            raise ValueError("--dataset mesh_folder needs --mesh-root PATH")
+        sets = [MeshFolder(args.mesh_root, split)
+                for split in ('train', 'test')]
+    else:
+        raise ValueError("--model hsn works on meshes: use --dataset "
+                         "synthetic_shrec or mesh_folder")
+    num_classes = sets[0].num_classes
+    # The precomputation is deterministic: cache it beside the data.
+    key = json.dumps([args.dataset, args.task, args.mesh_root,
+                      args.num_vertices, args.shapes_per_class,
+                      args.data_seed, args.radius, args.rings,
+                      args.max_order, args.logmap_method,
+                      [len(s) for s in sets]])
+    cache = os.path.join(args.root, 'hsn_cache', hashlib.sha1(
+        key.encode()).hexdigest()[:16] + '.pt')
+    if os.path.exists(cache):
+        train_items, test_items = torch.load(cache, weights_only=False)
+        return train_items, test_items, num_classes
+    pipeline = hsn_pipeline(args)
+    out = []
+    for split, dataset in zip(('train', 'test'), sets):
+        items = [pipeline(dataset[i]) for i in tqdm(
+            range(len(dataset)), desc=f'precomputing {split}',
+            disable=args.quiet, leave=False)]
+        out.append(items)
+    os.makedirs(os.path.dirname(cache), exist_ok=True)
+    atomic_torch_save(out, cache)
+    return out[0], out[1], num_classes
+
+
 def build_model(name: str, num_classes: int, args) -> torch.nn.Module:
     if name == 'deltanet':
         from tg_intrinsic.nn.models import DeltaNetClassification
         return DeltaNetClassification(
             3, num_classes, conv_channels=args.conv_channels, k=args.k,
             vector_stream=not args.no_vector_stream)
-    raise ValueError(f"unknown model {name!r}; choose 'deltanet'")
+    if name == 'hsn':
+        from tg_intrinsic.nn.models import (HSNClassification,
+                                            HSNSegmentation)
+        cls = HSNClassification if args.task == 'classification' \
+            else HSNSegmentation
+        return cls(3, num_classes, channels=args.hsn_channels,
+                   max_order=args.max_order, rings=args.rings)
+    raise ValueError(f"unknown model {name!r}; choose one of {MODELS}")
 
 
 @torch.no_grad()
@@ -118,16 +197,24 @@ def train(args) -> Dict:
         torch.set_num_threads(args.threads)
     device = torch.device(args.device if args.device != 'auto' else
                           ('cuda' if torch.cuda.is_available() else 'cpu'))
-    train_set, test_set = build_datasets(args.dataset, args.root,
-                                         args.num_points, args.mesh_root,
-                                         args.data_seed,
-                                         args.shapes_per_class)
     from tg_intrinsic.transforms import RandomRotation
-    augment = [train_set.transform, RandomScale((2 / 3, 3 / 2))]
-    if args.rotate:
-        augment.append(RandomRotation())
-    train_set.transform = Compose([t for t in augment if t is not None])
-    model = build_model(args.model, train_set.num_classes, args).to(device)
+    if args.model == 'hsn':
+        # Precomputed discs are intrinsic: rotations (which turn the frames
+        # too) keep them valid, a scale would not.
+        train_set, test_set, num_classes = build_mesh_datasets(args)
+        if args.rotate:
+            rotate = RandomRotation()
+            train_set = _Mapped(train_set, rotate)
+    else:
+        train_set, test_set = build_datasets(
+            args.dataset, args.root, args.num_points, args.mesh_root,
+            args.data_seed, args.shapes_per_class)
+        num_classes = train_set.num_classes
+        augment = [train_set.transform, RandomScale((2 / 3, 3 / 2))]
+        if args.rotate:
+            augment.append(RandomRotation())
+        train_set.transform = Compose([t for t in augment if t is not None])
+    model = build_model(args.model, num_classes, args).to(device)
     if args.optimizer == 'sgd':
         optimizer = torch.optim.SGD(model.parameters(), lr=args.lr,
                                     momentum=0.9,
@@ -159,7 +246,7 @@ def train(args) -> Dict:
     num_params = sum(p.numel() for p in model.parameters())
     print(f"{args.model} ({num_params / 1e6:.2f}M parameters) on "
           f"{args.dataset}: {len(train_set)} train / {len(test_set)} test, "
-          f"{train_set.num_classes} classes, {device}")
+          f"{num_classes} classes, {device}")
     started = time.perf_counter()
     for epoch in range(start_epoch, args.epochs + 1):
         model.train()
@@ -214,10 +301,26 @@ def train(args) -> Dict:
     return metrics
 
 
+class _Mapped(torch.utils.data.Dataset):
+    """A list of examples with a transform applied on access."""
+    def __init__(self, items, transform):
+        self.items, self.transform = items, transform
+
+    def __len__(self):
+        return len(self.items)
+
+    def __getitem__(self, index):
+        return self.transform(self.items[index])
+
+
 def parse_args(argv=None):
     parser = argparse.ArgumentParser(
         description='Train a tg_intrinsic classification network.')
-    parser.add_argument('--model', default='deltanet', choices=['deltanet'])
+    parser.add_argument('--model', default='deltanet', choices=MODELS)
+    parser.add_argument('--task', default='classification',
+                        choices=['classification', 'segmentation'],
+                        help='segmentation: per-vertex parts (hsn on '
+                        'synthetic_shrec)')
     parser.add_argument('--dataset', default='synthetic_modelnet',
                         choices=DATASETS)
     parser.add_argument('--root', default='data',
@@ -247,6 +350,19 @@ def parse_args(argv=None):
                         '(uniform on SO(3)), for data in arbitrary poses')
     parser.add_argument('--no-vector-stream', action='store_true',
                         help='ablation: drop the vector stream')
+    parser.add_argument('--hsn-channels', type=int, nargs=2,
+                        default=[16, 32], help='hsn features on levels 0, 1')
+    parser.add_argument('--max-order', type=int, default=1,
+                        help='hsn: highest rotation order (0: one stream)')
+    parser.add_argument('--rings', type=int, default=6)
+    parser.add_argument('--radius', type=float, default=0.2,
+                        help='hsn: disc radius on unit-area meshes')
+    parser.add_argument('--num-vertices', type=int, nargs=2, default=None,
+                        metavar=('LOW', 'HIGH'),
+                        help='hsn on synthetic_shrec: vertex range of the '
+                        'generated meshes (default 500 2000)')
+    parser.add_argument('--logmap-method', default='fast',
+                        choices=['fast', 'vector_heat'])
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--data-seed', type=int, default=0)
     parser.add_argument('--device', default='auto')
@@ -260,6 +376,8 @@ def parse_args(argv=None):
     for name in ('num_points', 'epochs', 'batch_size', 'eval_every', 'k'):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} must be at least 1")
+    if args.task == 'segmentation' and args.model != 'hsn':
+        parser.error("--task segmentation is available with --model hsn")
     return args
 
 

@@ -14,6 +14,7 @@ from .mesh import (face_areas, face_normals, vertex_normals, lumped_mass,
 from .sparse import to_scipy, from_scipy
 from .mls import mls_grad_div, build_mls_operators
 from .operators import SurfaceOperators
+from .logmap import geodesic_neighbourhoods, log_map, vertex_area_weights
 
 __all__ = [
     'knn',
@@ -37,4 +38,7 @@ __all__ = [
     'mls_grad_div',
     'build_mls_operators',
     'SurfaceOperators',
+    'geodesic_neighbourhoods',
+    'log_map',
+    'vertex_area_weights',
 ]

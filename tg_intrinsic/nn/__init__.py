@@ -1,8 +1,16 @@
-r"""Layers: :class:`DeltaConv` and vector-feature building blocks."""
+r"""Layers: :class:`DeltaConv`, :class:`HarmonicConv` and their vector and
+complex building blocks."""
 from .vector_linear import VectorLinear
 from .vector_nonlin import VectorNonLin
 from .vector_mlp import VectorMLP
 from .delta_conv import DeltaConv
+from .complex_relu import ComplexReLU
+from .complex_linear import ComplexLinear
+from .complex_batch_norm import ComplexBatchNorm
+from .harmonic_conv import HarmonicConv
+from .harmonic_resnet_block import HarmonicResNetBlock
 from . import models
 
-__all__ = ['VectorLinear', 'VectorNonLin', 'VectorMLP', 'DeltaConv', 'models']
+__all__ = ['VectorLinear', 'VectorNonLin', 'VectorMLP', 'DeltaConv',
+           'ComplexReLU', 'ComplexLinear', 'ComplexBatchNorm', 'HarmonicConv',
+           'HarmonicResNetBlock', 'models']

@@ -1,1 +1,5 @@
-"""tg_intrinsic.pool (filled in by later issues)."""
+r"""Pooling and unpooling between levels of a multiscale hierarchy."""
+from .parallel_transport_pool import ParallelTransportPool
+from .parallel_transport_unpool import ParallelTransportUnpool
+
+__all__ = ['ParallelTransportPool', 'ParallelTransportUnpool']

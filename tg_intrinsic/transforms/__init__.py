@@ -4,5 +4,12 @@ from .estimate_normals import EstimateNormals
 from .tangent_frames import TangentFrames
 from .mls_operators import MLSOperators
 from .random_rotation import RandomRotation
+from .normalize_area import NormalizeArea
+from .log_map import LogMap
+from .parallel_transport import ParallelTransport
+from .multiscale_supports import MultiscaleSupports
+from .harmonic_precompute import HarmonicPrecompute
 
-__all__ = ['EstimateNormals', 'TangentFrames', 'MLSOperators', 'RandomRotation']
+__all__ = ['EstimateNormals', 'TangentFrames', 'MLSOperators',
+           'RandomRotation', 'NormalizeArea', 'LogMap', 'ParallelTransport',
+           'MultiscaleSupports', 'HarmonicPrecompute']

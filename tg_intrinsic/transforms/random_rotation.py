@@ -1,4 +1,5 @@
 import math
+import re
 from typing import Optional
 
 import torch
@@ -8,6 +9,7 @@ from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
 _AXES = {'x': 0, 'y': 1, 'z': 2}
+_LEVEL = re.compile(r'_[1-9][0-9]*$')
 
 
 def random_rotation_matrix(axis: Optional[str] = None,
@@ -45,7 +47,7 @@ class RandomRotation(BaseTransform):
 
     Unlike PyG's :class:`~torch_geometric.transforms.RandomRotate`, normals
     (``normal`` or ``norm``) and tangent frames (``frame``) turn with the
-    points. Because the frames turn too, per-edge operators that are
+    points, on every level (``pos_1``, ``frame_1``, ...). Because the frames turn too, per-edge operators that are
     intrinsic to the surface (``grad_weight``, ``div_weight`` of
     :class:`MLSOperators`) stay valid and are kept.
 
@@ -72,14 +74,14 @@ class RandomRotation(BaseTransform):
                              "[N, 3]")
         data = data.clone()
         matrix = random_rotation_matrix(self.axis).to(pos.device, pos.dtype)
-        data.pos = pos @ matrix.T
-        for key in ('normal', 'norm'):
-            value = getattr(data, key, None)
-            if isinstance(value, Tensor) and value.shape == pos.shape:
+        for key, value in data.to_dict().items():
+            name = _LEVEL.sub('', key)  # pos_1 -> pos
+            if not isinstance(value, Tensor) or value.size(-1) != 3:
+                continue
+            if name in ('pos', 'normal', 'norm') and value.dim() == 2:
                 data[key] = value @ matrix.T
-        frame = getattr(data, 'frame', None)
-        if isinstance(frame, Tensor):
-            data.frame = frame @ matrix.T
+            elif name == 'frame' and value.dim() == 3:
+                data[key] = value @ matrix.T
         return data
 
     def __repr__(self) -> str:

@@ -1,5 +1,8 @@
 r"""Complete networks built from :mod:`tg_intrinsic.nn` layers."""
 from .deltanet_classification import DeltaNetClassification
 from .deltanet_segmentation import DeltaNetSegmentation
+from .hsn_classification import HSNClassification
+from .hsn_segmentation import HSNSegmentation
 
-__all__ = ['DeltaNetClassification', 'DeltaNetSegmentation']
+__all__ = ['DeltaNetClassification', 'DeltaNetSegmentation',
+           'HSNClassification', 'HSNSegmentation']

@@ -1,0 +1,234 @@
+import math
+
+import numpy as np
+import pytest
+import torch
+from scipy import integrate, special
+
+from tg_intrinsic.geometry.harmonic import (HarmonicOperator, harmonic_terms,
+                                            ring_weights)
+from tg_intrinsic.nn import (ComplexBatchNorm, ComplexLinear, ComplexReLU,
+                             HarmonicConv, HarmonicResNetBlock)
+from tg_intrinsic.nn.harmonic_resnet_block import harmonic_operators
+from tg_intrinsic.pool import ParallelTransportPool, ParallelTransportUnpool
+
+C128 = torch.complex128
+
+
+def random_discs(n=60, radius=0.45, seed=0):
+    """Random points in the unit square with their radius graph; the log
+    map is planar, the transport angles are arbitrary (the layer must not
+    care where they come from)."""
+    gen = torch.Generator().manual_seed(seed)
+    pos = torch.rand(n, 2, dtype=torch.float64, generator=gen)
+    j, i = (torch.cdist(pos, pos) < radius).nonzero().t()
+    diff = pos[j] - pos[i]
+    logmap = torch.stack([diff.norm(dim=1),
+                          torch.atan2(diff[:, 1], diff[:, 0])], 1)
+    transport = torch.rand(j.numel(), dtype=torch.float64,
+                           generator=gen) * 2 * math.pi
+    transport[j == i] = 0
+    weight = torch.rand(n, dtype=torch.float64, generator=gen) + 0.5
+    return torch.stack([j, i]), logmap, transport, weight, radius
+
+
+def gauge_change(edge_index, logmap, transport, angle):
+    """Turn frame i by angle[i]: angles measured in it drop by angle[i]."""
+    j, i = edge_index
+    theta = torch.where(logmap[:, 0] > 0, logmap[:, 1] - angle[i], 0.0)
+    return (torch.stack([logmap[:, 0], theta], 1),
+            transport - angle[i] + angle[j])
+
+
+def rotate_streams(x, angle):
+    """Features of order M in frames turned by angle: times e^{-iM angle}."""
+    orders = torch.arange(x.size(1), dtype=torch.float64)
+    return x * torch.polar(torch.ones_like(angle)[:, None],
+                           -angle[:, None] * orders)[:, :, None]
+
+
+def rel(a, b):
+    return float((a - b).abs().max().detach() / b.abs().max().detach())
+
+
+@pytest.mark.parametrize('prev_order,max_order,separate,offset', [
+    (0, 1, True, True), (1, 1, True, True), (1, 2, False, True),
+    (2, 2, True, False), (2, 1, False, False)])
+def test_sparse_aggregation_equals_per_edge_messages(prev_order, max_order,
+                                                     separate, offset):
+    edge_index, logmap, transport, weight, radius = random_discs()
+    harmonic = harmonic_terms(edge_index, logmap, weight, radius, 5,
+                              max(prev_order, max_order))
+    torch.manual_seed(0)
+    conv = HarmonicConv(3, 4, max_order, 5, prev_order, offset,
+                        separate).double()
+    x = torch.randn(60, prev_order + 1, 3, dtype=C128, requires_grad=True)
+    fast = conv(x, edge_index, harmonic, transport)
+    slow = conv(x, edge_index, harmonic, transport, backend='message')
+    assert fast.shape == (60, max_order + 1, 4)
+    assert rel(fast, slow) < 1e-12
+    params = [x] + list(conv.parameters())
+    g_fast = torch.autograd.grad(fast.abs().sum(), params)
+    g_slow = torch.autograd.grad(slow.abs().sum(), params)
+    for a, b in zip(g_fast, g_slow):
+        assert rel(a, b) < 1e-10
+
+
+def test_real_input_is_stream_zero():
+    edge_index, logmap, transport, weight, radius = random_discs()
+    harmonic = harmonic_terms(edge_index, logmap, weight, radius, 4, 1)
+    conv = HarmonicConv(2, 3, 1, 4, prev_order=0).double()
+    x = torch.randn(60, 2, dtype=torch.float64)
+    out = conv(x, edge_index, harmonic, transport)
+    ref = conv(torch.complex(x, 0 * x).unsqueeze(1), edge_index, harmonic,
+               transport)
+    assert torch.equal(out, ref)
+
+
+@pytest.mark.parametrize('max_order', [1, 2])
+def test_gauge_equivariance_of_every_block(max_order):
+    edge_index, logmap, transport, weight, radius = random_discs(seed=1)
+    rings = 4
+    gen = torch.Generator().manual_seed(5)
+    angle = torch.rand(60, dtype=torch.float64, generator=gen) * 2 * math.pi
+    logmap2, transport2 = gauge_change(edge_index, logmap, transport, angle)
+    torch.manual_seed(1)
+    conv = HarmonicConv(3, 4, max_order, rings, prev_order=max_order).double()
+    block = HarmonicResNetBlock(4, 6, max_order, rings, max_order).double()
+    lin = ComplexLinear(6, 5).double()
+    act = ComplexReLU(5).double()
+    torch.nn.init.constant_(act.bias, -0.3)
+    norm = ComplexBatchNorm(5, max_order + 1).double()
+    pairs = [(max_order + 1, max_order + 1)]
+
+    def network(logmap, transport, x):
+        harmonic = harmonic_terms(edge_index, logmap, weight, radius, rings,
+                                  max_order)
+        ops = harmonic_operators(edge_index, harmonic, transport, 60, pairs)
+        h = conv(x, edge_index, harmonic, transport)
+        h = block(h, ops)
+        return norm(act(lin(h)))
+
+    x = torch.randn(60, max_order + 1, 3, dtype=C128)
+    out = network(logmap, transport, x)
+    out2 = network(logmap2, transport2, rotate_streams(x, angle))
+    assert out.abs().max() > 1e-3
+    assert rel(out2, rotate_streams(out, angle)) < 1e-8
+    # order 0 is invariant
+    assert rel(out2[:, 0], out[:, 0]) < 1e-8
+
+
+def test_pool_and_unpool_are_gauge_equivariant():
+    gen = torch.Generator().manual_seed(2)
+    n, n_coarse = 50, 12
+    cluster = torch.cat([torch.arange(n_coarse),
+                         torch.randint(0, n_coarse, (n - n_coarse,),
+                                       generator=gen)])
+    phi = torch.rand(n, dtype=torch.float64, generator=gen) * 6
+    x = torch.randn(n, 3, 4, dtype=C128, generator=gen)
+    fine_angle = torch.rand(n, dtype=torch.float64, generator=gen) * 6
+    coarse_angle = torch.rand(n_coarse, dtype=torch.float64,
+                              generator=gen) * 6
+    # transport j -> c(j) seen in turned frames
+    phi2 = phi - coarse_angle[cluster] + fine_angle
+    pool, unpool = ParallelTransportPool(), ParallelTransportUnpool()
+    y = pool(x, cluster, phi, n_coarse)
+    y2 = pool(rotate_streams(x, fine_angle), cluster, phi2, n_coarse)
+    assert rel(y2, rotate_streams(y, coarse_angle)) < 1e-12
+    z, z2 = unpool(y, cluster, phi), unpool(y2, cluster, phi2)
+    assert rel(z2, rotate_streams(z, fine_angle)) < 1e-12
+    # unpooling a pooled constant-per-cluster field is the identity
+    const = unpool(y, cluster, phi)
+    assert rel(pool(const, cluster, phi, n_coarse), y) < 1e-12
+
+
+def test_centre_carries_no_angular_term():
+    # A disc with only its centre: m != 0 outputs must vanish, m = 0 not.
+    n = 5
+    edge_index = torch.arange(n).repeat(2, 1)
+    logmap = torch.zeros(n, 2, dtype=torch.float64)
+    logmap[:, 1] = 1.234  # a meaningless angle must not leak in
+    harmonic = harmonic_terms(edge_index, logmap,
+                              torch.ones(n, dtype=torch.float64), 1.0, 3, 2)
+    assert (harmonic[:, :, 1:] == 0).all() and (harmonic[:, 0, 0] == 1).all()
+    conv = HarmonicConv(2, 2, max_order=2, rings=3, prev_order=0).double()
+    out = conv(torch.randn(n, 2, dtype=torch.float64), edge_index, harmonic,
+               torch.zeros(n, dtype=torch.float64))
+    assert out[:, 1:].abs().max() == 0 and out[:, 0].abs().max() > 0
+
+
+def test_ring_weights_interpolate_and_vanish_at_the_radius():
+    r = torch.tensor([0.0, 0.1, 0.25, 0.49, 0.5, 0.7], dtype=torch.float64)
+    mu = ring_weights(r, 0.5, 4)  # rings at 0, .125, .25, .375
+    assert torch.allclose(mu[0], torch.tensor([1., 0, 0, 0],
+                                              dtype=torch.float64))
+    assert torch.allclose(mu[1], torch.tensor([.2, .8, 0, 0],
+                                              dtype=torch.float64))
+    assert torch.allclose(mu[2], torch.tensor([0., 0, 1, 0],
+                                              dtype=torch.float64))
+    assert mu[3].sum() < 0.1 and (mu[4:] == 0).all()
+
+
+@pytest.mark.parametrize('m', [0, 1, 2])
+def test_flat_grid_matches_continuous_correlation(m):
+    # On a fine grid with equal frames (no transport), the layer is the
+    # normalised correlation of the signal with R(r) e^{i m theta}. For a
+    # plane wave f = exp(i k . p) with k = |k| (cos a, sin a), Jacobi-Anger
+    # gives  out = f(p) 2 pi i^m e^{i m a} int_0^eps R(r) J_m(|k| r) r dr
+    #              / (pi eps^2).
+    h, eps, rings = 0.01, 0.2, 4
+    axis = torch.arange(-0.3, 0.3 + h / 2, h, dtype=torch.float64)
+    pos = torch.cartesian_prod(axis, axis)
+    centre = (pos.abs() <= 0.08).all(1).nonzero().flatten()
+    d = torch.cdist(pos[centre], pos)
+    c_local, j = (d < eps).nonzero().t()
+    i = centre[c_local]
+    diff = pos[j] - pos[i]
+    logmap = torch.stack([diff.norm(dim=1),
+                          torch.atan2(diff[:, 1], diff[:, 0])], 1)
+    edge_index = torch.stack([j, i])
+    harmonic = harmonic_terms(edge_index, logmap,
+                              torch.ones(len(pos), dtype=torch.float64), eps,
+                              rings, m)
+    conv = HarmonicConv(1, 1, max_order=m, rings=rings, prev_order=0,
+                        offset=False).double()
+    profile = torch.tensor([0.3, 1.0, -0.5, 0.8], dtype=torch.float64)
+    with torch.no_grad():
+        conv.radial.zero_()
+        conv.radial[m, :, 0, 0] = profile  # the (0 -> m) profile
+    transport = torch.zeros(j.numel(), dtype=torch.float64)
+
+    def radial(r):
+        return np.interp(r, np.arange(rings + 1) * eps / rings,
+                         np.append(profile.numpy(), 0.0))
+
+    for k, a in ((9.0, 0.3), (9.0, 0.3 + 1.1), (14.0, -2.0)):
+        wave = torch.polar(torch.ones(len(pos), dtype=torch.float64),
+                           k * (pos[:, 0] * math.cos(a)
+                                + pos[:, 1] * math.sin(a)))
+        out = conv(wave.view(-1, 1, 1), edge_index, harmonic, transport)
+        integral = integrate.quad(lambda r: radial(r) * special.jv(m, k * r)
+                                  * r, 0, eps, points=[0.05, 0.1, 0.15])[0]
+        factor = 2 * math.pi * (1j ** m) * np.exp(1j * m * a) * integral \
+            / (math.pi * eps ** 2)
+        expected = wave[centre] * complex(factor)
+        assert rel(out[centre, m, 0], expected) < 2e-2, (k, a)
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match="'rings' must be an integer"):
+        HarmonicConv(2, 2, rings=0)
+    conv = HarmonicConv(2, 3, max_order=1, rings=3, prev_order=1)
+    edge_index, logmap, transport, weight, radius = random_discs()
+    with pytest.raises(ValueError, match=r"expected features \[N, 2, 2\]"):
+        conv(torch.randn(60, 1, 2, dtype=torch.complex64), edge_index)
+    harmonic = harmonic_terms(edge_index, logmap, weight, radius, 3, 0)
+    with pytest.raises(ValueError, match='precompute with max_order >= 1'):
+        HarmonicOperator(edge_index, harmonic, transport, 60, 2, 2)
+    with pytest.raises(ValueError, match='finite'):
+        bad = logmap.clone()
+        bad[0, 0] = float('nan')
+        harmonic_terms(edge_index, bad, weight, radius, 3, 1)
+    with pytest.raises(ValueError, match='zero total weight'):
+        harmonic_terms(edge_index, logmap, 0 * weight, radius, 3, 1)
+    assert 'HarmonicConv(2, 3, max_order=1, rings=3' in repr(conv)

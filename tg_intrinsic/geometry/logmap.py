@@ -1,0 +1,717 @@
+r"""Geodesic neighbourhoods, log maps and parallel transport on surfaces, the
+precomputation of Harmonic Surface Networks (Wiersma et al., "CNNs on
+surfaces using rotation-equivariant features", SIGGRAPH 2020).
+
+Edges follow PyG's ``source_to_target`` flow: ``edge_index[0]`` is the
+neighbour :math:`j`, ``edge_index[1]`` the centre :math:`i`, and an edge
+:math:`(j \to i)` carries quantities *at i about j*, in the tangent frame
+:math:`(e_u(i), e_v(i), n_i)` of the centre (``frame[i]``, rows
+:math:`e_u, e_v, n`):
+
+* the log map of :math:`p_j` in the tangent plane of :math:`i` in polar form
+  :math:`(r_{ij}, \theta_{ij})`: :math:`r_{ij}` is the geodesic distance and
+  :math:`\theta_{ij}` the angle of :math:`\log_i(p_j)` from :math:`e_u(i)`
+  towards :math:`e_v(i)`;
+* the transport angle :math:`\phi_{ji}`: parallel transport along the
+  shortest geodesic from :math:`j` to :math:`i` turns the vector at angle
+  :math:`a` in :math:`j`'s frame into the vector at angle
+  :math:`a + \phi_{ji}` in :math:`i`'s frame, so an order-:math:`M` complex
+  feature transports as :math:`z \mapsto z \, e^{\mathrm{i} M \phi_{ji}}`.
+
+Self-loops :math:`(i \to i)` get :math:`r = \theta = \phi = 0`. All angles
+are wrapped to :math:`(-\pi, \pi]`.
+"""
+import importlib.util
+import math
+from typing import Optional, Tuple
+
+import numpy as np
+import torch
+from numba import njit, prange
+from torch import Tensor
+
+from . import _vector_heat
+from ._checks import (check_faces, check_nondegenerate, check_points,
+                      check_positive_float, check_positive_int, check_tensor,
+                      check_vectors, same_device)
+from ._fmm import march_from, surface_index
+from .frames import check_frames, tangent_frames
+from .mesh import edge_face_counts, face_areas, lumped_mass, vertex_normals
+from .neighbors import knn, radius
+
+__all__ = ['geodesic_neighbourhoods', 'log_map', 'vertex_area_weights']
+
+METHODS = ('fast', 'vector_heat')
+
+
+# ----------------------------------------------------------------------------
+# validation
+# ----------------------------------------------------------------------------
+def _check_mesh(pos: Tensor, face, strict: bool = False) -> Tensor:
+    """Faces that the geodesic code can march on (and, with ``strict``,
+    that geometry-central accepts)."""
+    face = check_faces(face, pos.size(0), pos)
+    if face.size(1) == 0:
+        raise ValueError("'face' has no triangles; pass face=None to treat "
+                         "the points as a point cloud")
+    used = torch.zeros(pos.size(0), dtype=torch.bool, device=pos.device)
+    used[face.flatten()] = True
+    if not bool(used.all()):
+        bad = (~used).nonzero().flatten()
+        raise ValueError(f"{bad.numel()} vertex/vertices are not referenced "
+                         f"by any triangle (first: {bad[:5].tolist()}), so "
+                         f"no geodesic reaches them; drop them with "
+                         f"remove_unreferenced_vertices(pos, face)")
+    p = pos.double()
+    cross = torch.linalg.cross(p[face[1]] - p[face[0]],
+                               p[face[2]] - p[face[0]])
+    scale = torch.stack([(p[face[a]] - p[face[b]]).pow(2).sum(-1)
+                         for a, b in ((0, 1), (1, 2), (2, 0))]).amax(0)
+    check_nondegenerate(0.5 * cross.norm(dim=-1), scale)
+    if strict:
+        edges, count = edge_face_counts(face, pos.size(0))
+        if bool((count > 2).any()):
+            bad = edges[:, count > 2]
+            raise ValueError(f"the mesh has {bad.size(1)} edge(s) shared by "
+                             f"more than two triangles (first: "
+                             f"{bad[:, 0].tolist()}); the vector heat method "
+                             f"needs a manifold mesh, use method='fast' or "
+                             f"repair the mesh")
+        a = torch.cat([face[0], face[1], face[2]])
+        b = torch.cat([face[1], face[2], face[0]])
+        n = pos.size(0)
+        _, directed = torch.unique(a * n + b, return_counts=True)
+        if bool((directed > 1).any()):
+            raise ValueError("the triangles are not consistently oriented "
+                             "(a directed edge occurs twice); the vector heat "
+                             "method needs an oriented manifold mesh, e.g. "
+                             "fix it with trimesh's fix_winding()")
+    return face
+
+
+def _check_edge_index(edge_index, num: int, ref: Tensor) -> Tensor:
+    edge_index = check_tensor(edge_index, 'edge_index')
+    if edge_index.dim() != 2 or edge_index.size(0) != 2:
+        raise ValueError(f"'edge_index' must have shape [2, E], got "
+                         f"{list(edge_index.shape)}")
+    if edge_index.dtype != torch.long:
+        raise ValueError(f"'edge_index' must be torch.long, got "
+                         f"{edge_index.dtype}")
+    same_device(edge_index, 'edge_index', ref)
+    if edge_index.numel() > 0:
+        lo, hi = int(edge_index.min()), int(edge_index.max())
+        if lo < 0 or hi >= num:
+            raise ValueError(f"'edge_index' holds indices in [{lo}, {hi}] "
+                             f"but there are only {num} points")
+    return edge_index
+
+
+def _check_centers(centers, pos: Tensor) -> Tensor:
+    centers = check_tensor(centers, 'centers')
+    if centers.dim() != 1 or centers.dtype != torch.long:
+        raise ValueError(f"'centers' must be a 1-D torch.long tensor of "
+                         f"point indices, got shape {list(centers.shape)} "
+                         f"and dtype {centers.dtype}")
+    same_device(centers, 'centers', pos)
+    if centers.numel() > 0 and (int(centers.min()) < 0
+                                or int(centers.max()) >= pos.size(0)):
+        raise ValueError(f"'centers' must index the {pos.size(0)} points")
+    if centers.unique().numel() != centers.numel():
+        raise ValueError("'centers' holds repeated indices; pass each "
+                         "centre once")
+    return centers
+
+
+def _frames_for(pos: Tensor, frame, face: Optional[Tensor]) -> Tensor:
+    if frame is not None:
+        frame = check_frames(frame, pos.size(0), pos)
+        if frame.dtype != pos.dtype:
+            raise ValueError(f"'frame' is {frame.dtype} but 'pos' is "
+                             f"{pos.dtype}; convert one of them")
+        return frame
+    if face is None:
+        raise ValueError("log maps of a point cloud need tangent frames: "
+                         "estimate normals first and pass "
+                         "frame=tangent_frames(estimate_normals(pos))")
+    return tangent_frames(vertex_normals(pos, face))
+
+
+# ----------------------------------------------------------------------------
+# the 'fast' method
+# ----------------------------------------------------------------------------
+def _arc_factor(angle: Tensor) -> Tensor:
+    r""":math:`a / (2 \sin(a / 2))`: arc length over chord on a circle whose
+    tangents turn by :math:`a` between the two ends."""
+    small = angle < 1e-3
+    safe = torch.where(small, torch.ones_like(angle), angle)
+    exact = safe / (2.0 * torch.sin(0.5 * safe))
+    return torch.where(small, 1.0 + angle * angle / 24.0, exact)
+
+
+# The per-edge maths below works on coordinate-major [3, E] tensors: dot and
+# cross products of rows are plain elementwise operations, several times
+# faster than reductions over a trailing dimension of size 3.
+def _dot(a: Tensor, b: Tensor) -> Tensor:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cross(a: Tensor, b: Tensor) -> Tensor:
+    return torch.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                        a[0] * b[1] - a[1] * b[0]])
+
+
+def _turn(n_i: Tensor, n_j: Tensor) -> Tuple[Tensor, Tensor, Tensor]:
+    """Cosine, rotation axis (not normalised) and angle of the smallest
+    rotation taking ``n_j`` to ``n_i`` (rows of [3, E] tensors)."""
+    cos = _dot(n_i, n_j).clamp(-1.0, 1.0)
+    axis = _cross(n_j, n_i)
+    angle = torch.atan2(torch.sqrt(_dot(axis, axis)), cos)
+    return cos, axis, angle
+
+
+def _arc_distance(pos: Tensor, normal: Tensor, j: Tensor, i: Tensor
+                  ) -> Tensor:
+    p, n = pos.t(), normal.t()
+    d = p[:, j] - p[:, i]
+    _, _, angle = _turn(n[:, i], n[:, j])
+    return torch.sqrt(_dot(d, d)) * _arc_factor(angle)
+
+
+def _fast(pos: Tensor, frame: Tensor, edge_index: Tensor
+          ) -> Tuple[Tensor, Tensor, Tensor]:
+    if pos.device.type == 'cpu':
+        return _fast_numba(pos, frame, edge_index)
+    return _fast_torch(pos, frame, edge_index)
+
+
+def _fast_numba(pos: Tensor, frame: Tensor, edge_index: Tensor
+                ) -> Tuple[Tensor, Tensor, Tensor]:
+    """One compiled pass over the edges (CPU, float64 inside)."""
+    num = edge_index.size(1)
+    out = np.empty((3, num))
+    j, i = edge_index.numpy()
+    _fast_kernel(pos.detach().double().numpy(),
+                 frame.detach().double().contiguous().numpy(), j, i, out)
+    out = torch.from_numpy(out).to(pos.dtype)
+    return out[0], out[1], out[2]
+
+
+@njit(cache=True, parallel=True)
+def _fast_kernel(pos, frame, nbr, ctr, out):  # pragma: no cover (numba)
+    """:func:`_fast_torch`, edge by edge."""
+    for e in prange(nbr.shape[0]):
+        a = ctr[e]
+        b = nbr[e]
+        if a == b:
+            out[0, e] = 0.0
+            out[1, e] = 0.0
+            out[2, e] = 0.0
+            continue
+        d = pos[b] - pos[a]
+        u_i = frame[a, 0]
+        v_i = frame[a, 1]
+        n_i = frame[a, 2]
+        n_j = frame[b, 2]
+        cos = min(1.0, max(-1.0, n_i[0] * n_j[0] + n_i[1] * n_j[1]
+                           + n_i[2] * n_j[2]))
+        k0 = n_j[1] * n_i[2] - n_j[2] * n_i[1]
+        k1 = n_j[2] * n_i[0] - n_j[0] * n_i[2]
+        k2 = n_j[0] * n_i[1] - n_j[1] * n_i[0]
+        angle = np.arctan2(np.sqrt(k0 * k0 + k1 * k1 + k2 * k2), cos)
+        if angle < 1e-3:
+            factor = 1.0 + angle * angle / 24.0
+        else:
+            factor = angle / (2.0 * np.sin(0.5 * angle))
+        out[0, e] = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * factor
+        out[1, e] = np.arctan2(d[0] * v_i[0] + d[1] * v_i[1] + d[2] * v_i[2],
+                               d[0] * u_i[0] + d[1] * u_i[1] + d[2] * u_i[2])
+        v = frame[b, 0]
+        if 1.0 + cos > 1e-6:
+            kv = (k0 * v[0] + k1 * v[1] + k2 * v[2]) / max(1.0 + cos, 1e-300)
+            m0 = cos * v[0] + k1 * v[2] - k2 * v[1] + kv * k0
+            m1 = cos * v[1] + k2 * v[0] - k0 * v[2] + kv * k1
+            m2 = cos * v[2] + k0 * v[1] - k1 * v[0] + kv * k2
+        else:
+            uv = u_i[0] * v[0] + u_i[1] * v[1] + u_i[2] * v[2]
+            m0 = 2.0 * uv * u_i[0] - v[0]
+            m1 = 2.0 * uv * u_i[1] - v[1]
+            m2 = 2.0 * uv * u_i[2] - v[2]
+        out[2, e] = np.arctan2(m0 * v_i[0] + m1 * v_i[1] + m2 * v_i[2],
+                               m0 * u_i[0] + m1 * u_i[1] + m2 * u_i[2])
+
+
+def _fast_torch(pos: Tensor, frame: Tensor, edge_index: Tensor
+                ) -> Tuple[Tensor, Tensor, Tensor]:
+    """Vectorised over edges (any device); the reference for the numba
+    kernel."""
+    j, i = edge_index
+    p = pos.t()
+    e_u, e_v, n = (frame[:, k].t() for k in range(3))
+    d = p[:, j] - p[:, i]
+    u_i, v_i, n_i = e_u[:, i], e_v[:, i], n[:, i]
+    cos, axis, angle = _turn(n_i, n[:, j])
+    r = torch.sqrt(_dot(d, d)) * _arc_factor(angle)
+    # Direction: the chord projected onto the tangent plane of i (exact on
+    # spheres and planes, where the geodesic lies in the plane of the chord
+    # and the normal); the normal component drops out of both dot products.
+    theta = torch.atan2(_dot(d, v_i), _dot(d, u_i))
+    # Transport: the smallest rotation taking n_j to n_i, applied to e_u(j):
+    # R v = cos v + k x v + (k . v) k / (1 + cos), with k = n_j x n_i.
+    v = e_u[:, j]
+    denom = (1.0 + cos).clamp_min(torch.finfo(pos.dtype).eps)
+    moved = cos * v + _cross(axis, v) + (_dot(axis, v) / denom) * axis
+    # Opposite normals (a fold): no smallest rotation; turn by pi about e_u.
+    flip = 1.0 + cos <= 1e-6
+    if bool(flip.any()):
+        half = u_i[:, flip]
+        moved[:, flip] = 2.0 * _dot(half, v[:, flip]) * half - v[:, flip]
+    phi = torch.atan2(_dot(moved, v_i), _dot(moved, u_i))
+    loop = i == j
+    zero = torch.zeros_like(r)
+    return (torch.where(loop, zero, r), torch.where(loop, zero, theta),
+            torch.where(loop, zero, phi))
+
+
+# ----------------------------------------------------------------------------
+# public API
+# ----------------------------------------------------------------------------
+def geodesic_neighbourhoods(pos: Tensor, eps: float,
+                            face: Optional[Tensor] = None,
+                            normal: Optional[Tensor] = None,
+                            max_neighbors: Optional[int] = None,
+                            centers: Optional[Tensor] = None
+                            ) -> Tuple[Tensor, Tensor]:
+    r"""Builds the geodesic disc graph: every pair :math:`(j \to i)` whose
+    geodesic distance is below :math:`\varepsilon`, self-loops included,
+
+    .. math::
+        \mathcal{N}(i) = \{ j : d(p_i, p_j) < \varepsilon \}.
+
+    On a mesh, :math:`d` is computed by fast marching (Kimmel and Sethian,
+    1998), truncated at :math:`\varepsilon`, from every centre in parallel
+    (numba on the CPU): Dijkstra's order over vertices with distances
+    updated through triangles unfolded into the plane, and relaxation
+    sweeps that repair paths through obtuse triangles. It is exact on flat
+    meshes up to rare pairs behind several obtuse triangles (at most 2 %
+    too long on a strongly jittered grid), first-order accurate on curved
+    ones (below 0.3 % relative error on a 2.5k-vertex unit icosphere), never
+    leaves the surface (two sheets that nearly touch stay apart), and is
+    much cheaper than any geodesic solve.
+
+    On a point cloud, the candidates are the Euclidean ball of radius
+    :math:`\varepsilon` (a superset, since geodesic distances are at least
+    Euclidean) from :func:`radius`, and :math:`d` is the chord corrected for
+    the angle :math:`a` between the normals, as on a circle arc,
+    :math:`d = \|p_j - p_i\| \, a / (2 \sin(a / 2))`; without normals,
+    :math:`d` is the Euclidean distance.
+
+    Centres whose disc holds no other point keep only their self-loop; if
+    that happens to every centre, :math:`\varepsilon` is below the sampling
+    spacing and a :class:`ValueError` says so.
+
+    Args:
+        pos (torch.Tensor): Points (mesh vertices).
+        eps (float): Disc radius :math:`\varepsilon`, in the units of
+            :obj:`pos`.
+        face (torch.Tensor, optional): Triangles in PyG layout; without
+            them :obj:`pos` is a point cloud. (default: :obj:`None`)
+        normal (torch.Tensor, optional): Point-cloud normals for the arc
+            correction (ignored for meshes). (default: :obj:`None`)
+        max_neighbors (int, optional): Keep at most this many nearest
+            neighbours per centre (the self-loop included).
+            (default: :obj:`None`, no cap)
+        centers (torch.Tensor, optional): Indices of the centres to build
+            discs for. (default: :obj:`None`, every point)
+
+    Shapes:
+        - **input:** pos :math:`(N, 3)`, face :math:`(3, F)`,
+          normal :math:`(N, 3)`, centers :math:`(M)`
+        - **output:** ``(edge_index, dist)``: :math:`(2, E)` sorted by centre
+          and then by distance, and the distances :math:`(E)` in
+          :obj:`pos`'s dtype
+    """
+    pos = check_points(pos, min_points=1)
+    eps = check_positive_float(eps, 'eps')
+    cap = (pos.size(0) if max_neighbors is None
+           else check_positive_int(max_neighbors, 'max_neighbors'))
+    if centers is None:
+        centre_idx = torch.arange(pos.size(0), device=pos.device)
+    else:
+        centre_idx = _check_centers(centers, pos)
+    if face is not None:
+        face = _check_mesh(pos, face)
+        p = pos.detach().double().cpu().numpy()
+        f = face.t().contiguous().cpu().numpy()
+        index = surface_index(p, f)
+        # March one mean edge length past eps, so that the relaxation sweeps
+        # can repair distances up to eps; gains far below an edge length
+        # (first-order noise on curved meshes) do not trigger more sweeps.
+        spacing = float(index[3].mean())
+        ptr, nbr, dist = march_from(f, index, centre_idx.cpu().numpy(), eps,
+                                    cap, slack=spacing, tol=1e-6 * spacing)
+        i = torch.from_numpy(np.repeat(centre_idx.cpu().numpy(),
+                                       np.diff(ptr)))
+        edge_index = torch.stack([torch.from_numpy(nbr), i]).to(pos.device)
+        dist = torch.from_numpy(dist).to(pos.dtype).to(pos.device)
+    else:
+        if normal is not None:
+            normal = check_vectors(normal, 'normal', pos.size(0), pos)
+        j, q = radius(pos, eps, max_num_neighbors=pos.size(0), loop=True,
+                      query=pos[centre_idx])
+        # Self-loops are added here, so that every centre has one.
+        other = centre_idx[q] != j
+        slot = torch.arange(centre_idx.numel(), device=pos.device)
+        j = torch.cat([centre_idx, j[other]])
+        q = torch.cat([slot, q[other]])
+        i = centre_idx[q]
+        if normal is not None:
+            unit = normal / normal.norm(dim=-1, keepdim=True).clamp_min(
+                torch.finfo(pos.dtype).tiny)
+            dist = _arc_distance(pos, unit, j, i)
+        else:
+            dist = (pos[j] - pos[i]).norm(dim=-1)
+        dist = torch.where(i == j, torch.zeros_like(dist), dist)
+        keep = dist < eps
+        i, j, dist = i[keep], j[keep], dist[keep]
+        # Sort by centre slot, then distance; then cap every row.
+        slot = q[keep]
+        order = torch.argsort(dist, stable=True)
+        order = order[torch.argsort(slot[order], stable=True)]
+        i, j, dist, slot = i[order], j[order], dist[order], slot[order]
+        count = torch.bincount(slot, minlength=centre_idx.numel())
+        start = torch.cumsum(count, 0) - count
+        rank = torch.arange(slot.numel(), device=pos.device) - start[slot]
+        keep = rank < cap
+        edge_index = torch.stack([j[keep], i[keep]])
+        dist = dist[keep]
+    if centre_idx.numel() > 0 and edge_index.size(1) == centre_idx.numel():
+        raise ValueError(f"eps={eps:g} is smaller than the spacing of the "
+                         f"points: every disc holds only its centre; "
+                         f"increase eps (e.g. to a few mean edge lengths)")
+    return edge_index, dist
+
+
+def log_map(pos: Tensor, edge_index: Tensor, frame: Optional[Tensor] = None,
+            face: Optional[Tensor] = None, method: str = 'fast',
+            margin: float = 8.0, workers: Optional[int] = None
+            ) -> Tuple[Tensor, Tensor, Tensor]:
+    r"""Log map in polar form and parallel-transport angle for every edge
+    :math:`(j \to i)`, in the tangent frame of the centre :math:`i`:
+
+    .. math::
+        \log_i(p_j) = r_{ij} \left(\cos\theta_{ij} \, e_u(i)
+        + \sin\theta_{ij} \, e_v(i)\right), \qquad
+        P_{j \to i}\, e_u(j) = \cos\phi_{ji} \, e_u(i)
+        + \sin\phi_{ji} \, e_v(i),
+
+    with :math:`P_{j \to i}` the parallel transport along the shortest
+    geodesic. A vector at angle :math:`a` in :math:`j`'s frame arrives at
+    angle :math:`a + \phi_{ji}`; rotating frame :math:`i` by :math:`\alpha`
+    shifts :math:`\theta_{ij}` and :math:`\phi_{ji}` by :math:`-\alpha`, and
+    rotating frame :math:`j` by :math:`\beta` shifts :math:`\phi_{ji}` by
+    :math:`+\beta`.
+
+    ``method='fast'`` (any device, float32/float64; a compiled loop over
+    the edges on the CPU, vectorised torch elsewhere): the chord
+    :math:`d = p_j - p_i` projected onto the tangent plane of :math:`i`
+    gives :math:`\theta_{ij}`; its length corrected for the angle :math:`a`
+    between the normals, :math:`r_{ij} = \|d\| \, a / (2 \sin(a/2))` (exact
+    on a circle arc), gives :math:`r_{ij}`; and the smallest rotation taking
+    :math:`n_j` to :math:`n_i`, applied to :math:`e_u(j)`, gives
+    :math:`\phi_{ji}`. Exact on planes and spheres (with exact normals);
+    elsewhere the error grows with the disc radius and the variation of the
+    curvature across it (median 0.06 rad from the vector heat result on a
+    unit-area scan at :math:`\varepsilon = 0.2`, see the benchmark).
+
+    ``method='vector_heat'`` (CPU, via potpourri3d): the log map
+    (``'AffineLocal'`` strategy where potpourri3d has it) and the transport
+    of the Vector Heat Method (Sharp, Soliman and Crane, 2019), one solve
+    each per centre, converted from geometry-central's vertex tangent spaces
+    to :obj:`frame` (a rotation and, where their normal points the other
+    way, a reflection; at boundary vertices also undoing the rescaling of
+    the fan of triangles to a half plane). :math:`\phi_{ji}` is minus the
+    angle by which the transport of a vector from :math:`i` to :math:`j`
+    turns it, since transport back along the same geodesic is the inverse.
+
+    The original HSN precomputation solves both problems per vertex on the
+    whole surface. Here centres are grouped around seeds (farthest point
+    sampling) and every group is solved on a local patch: the vertices
+    within ``margin`` mean edge lengths (fast-marching distance) of one of
+    its discs, with one factorisation per patch and patches in parallel
+    processes. The heat flows behind both quantities run for the time
+    :math:`t = h^2` (:math:`h` the mean edge length), and the influence of
+    the patch rim decays like :math:`e^{-2 b / h}` with its distance
+    :math:`b`: with the default of 8 edge lengths the patch result matches
+    the global one to about :math:`10^{-3}` rad (99th percentile) on scanned
+    meshes and to :math:`10^{-7}` on flat ones. Patches keep the diffusion
+    time of the whole surface. When the discs are so large that patches
+    would be nearly the whole surface (a cost model of the solves decides,
+    e.g. :math:`\varepsilon = 0.2` on a 2.5k-vertex unit-area mesh), the
+    centres are solved on their whole component instead, as the original
+    does, split over the workers. A patch that falls apart keeps the component
+    of each centre; a centre whose neighbours are not all in its patch
+    component (or whose solve fails) is redone on its whole connected
+    component, as in the original. Meshes must be oriented manifolds
+    (geometry-central's requirement); rim vertices where a cut patch pinches
+    are split. At mesh boundary vertices whose fan of triangles is not a
+    straight half plane (e.g. corners), geometry-central's connection makes
+    a cone point: directions and transport from or to such a vertex are
+    distorted (up to 1.4 rad at the 90 degree corner of a flat square), as
+    in the original; straight rims are exact. On point clouds the patch is a
+    Euclidean ball and the solver potpourri3d's point-cloud heat solver,
+    which is markedly less accurate than the mesh one (on a 3k-point unit
+    sphere with :math:`\varepsilon = 0.4`: log-map angles 0.03 rad median,
+    0.26 rad worst; radii up to 5 % of :math:`\varepsilon`; transport 1e-3
+    rad median, 0.16 rad worst).
+
+    Args:
+        pos (torch.Tensor): Points (mesh vertices).
+        edge_index (torch.Tensor): Edges :math:`(j \to i)`, e.g. from
+            :func:`geodesic_neighbourhoods`.
+        frame (torch.Tensor, optional): Tangent frames, rows
+            :math:`(e_u, e_v, n)`. (default: :obj:`None`: for meshes
+            ``tangent_frames(vertex_normals(pos, face))``; point clouds must
+            pass frames)
+        face (torch.Tensor, optional): Triangles in PyG layout. Needed by
+            ``'vector_heat'`` on meshes; ``'fast'`` only uses it for the
+            default frames. (default: :obj:`None`)
+        method (str, optional): ``'fast'`` or ``'vector_heat'``.
+            (default: :obj:`'fast'`)
+        margin (float, optional): ``'vector_heat'`` patch margin around the
+            discs, in mean edge lengths (mean point spacings for clouds).
+            (default: :obj:`8.0`)
+        workers (int, optional): ``'vector_heat'`` worker processes; large
+            jobs only (small ones run in this process, where starting
+            workers would cost more). (default: :obj:`None`, one per CPU)
+
+    Shapes:
+        - **input:** pos :math:`(N, 3)`, edge_index :math:`(2, E)`,
+          frame :math:`(N, 3, 3)`, face :math:`(3, F)`
+        - **output:** ``(r, theta, phi)``, each :math:`(E)` in :obj:`pos`'s
+          dtype and device
+    """
+    pos = check_points(pos, min_points=1)
+    edge_index = _check_edge_index(edge_index, pos.size(0), pos)
+    if method not in METHODS:
+        raise ValueError(f"'method' must be one of {METHODS}, got "
+                         f"{method!r}")
+    if face is not None:
+        face = _check_mesh(pos, face, strict=method == 'vector_heat')
+    frame = _frames_for(pos, frame, face)
+    if method == 'fast':
+        return _fast(pos, frame, edge_index)
+    margin = check_positive_float(margin, 'margin', allow_zero=True)
+    if importlib.util.find_spec('potpourri3d') is None:
+        raise ImportError("method='vector_heat' needs potpourri3d: pip "
+                          "install potpourri3d (or tg_intrinsic[heat])")
+    workers = (_vector_heat.default_workers() if workers is None
+               else check_positive_int(workers, 'workers'))
+    r, theta, phi = _vector_heat_log_map(pos, edge_index, frame, face,
+                                         margin, workers)
+    return (r.to(pos.dtype).to(pos.device),
+            theta.to(pos.dtype).to(pos.device),
+            phi.to(pos.dtype).to(pos.device))
+
+
+def _vector_heat_log_map(pos, edge_index, frame, face, margin, workers):
+    vh = _vector_heat
+    num = edge_index.size(1)
+    if num == 0:
+        empty = torch.zeros(0, dtype=torch.float64)
+        return empty, empty, empty
+    kind = 'mesh' if face is not None else 'cloud'
+    p = pos.detach().double().cpu().numpy()
+    fr = frame.detach().double().cpu().numpy()
+    f = face.t().contiguous().cpu().numpy() if face is not None else None
+    j, i = edge_index.cpu().numpy()
+    label = vh.vertex_components(kind, p, f)
+    across = label[i] != label[j]
+    if across.any():
+        e = int(np.flatnonzero(across)[0])
+        raise ValueError(f"{int(across.sum())} edge(s) join different "
+                         f"connected components of the mesh (first: "
+                         f"{j[e]} -> {i[e]}), so no geodesic exists; build "
+                         f"the graph with geodesic_neighbourhoods(), which "
+                         f"never does that")
+    order = np.argsort(i, kind='stable')
+    centres, start, counts = np.unique(i[order], return_index=True,
+                                       return_counts=True)
+    ptr = np.append(start, num).astype(np.int64)
+    nbr = j[order]
+    # The 'fast' answer sizes the patches (reach of every disc) and picks
+    # the branch of transported angles at boundary vertices.
+    est = [t.cpu().numpy()[order] for t in _fast(
+        pos.detach().double(), frame.detach().double(), edge_index)]
+    reach = np.maximum.reduceat(est[0], start)
+    spacing = vh.mean_spacing(kind, p, f)
+    if kind == 'mesh':
+        area = float(face_areas(pos.detach().double().cpu(),
+                                face.cpu()).sum())
+    else:
+        area = p.shape[0] * spacing ** 2
+    jobs = vh.plan_jobs(kind, p, f, label, centres, ptr, nbr, order, reach,
+                        margin * spacing, est[2])
+    density = p.shape[0] / max(area, 1e-300)
+    patch = np.array([min(p.shape[0], density * math.pi * job['size'] ** 2)
+                      for job in jobs])
+    sizes = np.array([job['centres'].size for job in jobs])
+    work = float((sizes * patch).sum())
+    # Where the discs cover much of the surface, patches are nearly the
+    # whole surface and only add factorisations: then solve on the whole
+    # components (split across the workers), as the original does.
+    comps, per_comp = np.unique(label[centres], return_counts=True)
+    comp_vertices = np.bincount(label)[comps]
+    whole_work = float((per_comp * comp_vertices).sum())
+    # Each worker factorises its component; split only if they will start.
+    chunks = workers if whole_work > vh.POOL_WORK else 1
+    whole = vh.solve_cost(comp_vertices, per_comp,
+                          np.minimum(chunks, per_comp))
+    if vh.PLAN == 'whole' or (vh.PLAN == 'auto'
+                              and whole <= vh.solve_cost(patch, sizes)):
+        work = whole_work
+        jobs = vh.whole_jobs(label, np.arange(centres.size), centres, ptr,
+                             nbr, order, est[2], chunks=chunks)
+    results = vh.run_jobs(jobs, kind, p, f, fr, spacing, workers, work)
+    failed = np.concatenate([res[4] for res in results])
+    if failed.size:
+        rows = np.searchsorted(centres, failed)
+        more = vh.run_jobs(vh.whole_jobs(label, rows, centres, ptr, nbr,
+                                         order, est[2]),
+                           kind, p, f, fr, spacing, workers, work)
+        still = np.concatenate([res[4] for res in more])
+        if still.size:
+            raise ValueError(f"the vector heat solve failed for "
+                             f"{still.size} centre(s) (first: "
+                             f"{still[:5].tolist()}) even on their whole "
+                             f"connected component; check the mesh for "
+                             f"slivers or use method='fast'")
+        results += more
+    r = np.empty(num)
+    theta = np.empty(num)
+    phi = np.empty(num)
+    for eid, rr, tt, pp, _ in results:  # a loop over patches
+        r[eid], theta[eid], phi[eid] = rr, tt, pp
+    return (torch.from_numpy(r), torch.from_numpy(theta),
+            torch.from_numpy(phi))
+
+
+def vertex_area_weights(pos: Tensor, face: Optional[Tensor] = None,
+                        normal: Optional[Tensor] = None, k: int = 8
+                        ) -> Tensor:
+    r"""Area :math:`A_j` of the surface around every point, the integration
+    weight of a neighbour in a discretised surface integral,
+
+    .. math::
+        \int_{B_\varepsilon(i)} f \, dA \approx \sum_{j \in \mathcal{N}(i)}
+        A_j f(p_j)
+
+    (Harmonic Surface Networks normalise :math:`A_j` over each
+    neighbourhood; that is left to the caller).
+
+    On a mesh, :math:`A_j` is the barycentric vertex area, one third of the
+    area of the incident triangles (:func:`lumped_mass`). On a point cloud,
+    it is the area of the Voronoi cell of :math:`p_j` among its :obj:`k`
+    nearest neighbours projected onto its tangent plane (an exact half-plane
+    intersection per point, numba), clipped to the regular octagon around
+    the circle of radius 0.6 times their mean distance, which holds the
+    cells of interior points (about 0.58 to 0.71 times the spacing) and
+    keeps cells on an open boundary bounded (there they overestimate, up to
+    about twice at the corner of a grid). On a uniform grid of spacing
+    :math:`h` the interior weights are exactly :math:`h^2`.
+
+    Args:
+        pos (torch.Tensor): Points (mesh vertices).
+        face (torch.Tensor, optional): Triangles in PyG layout.
+            (default: :obj:`None`)
+        normal (torch.Tensor, optional): Point-cloud normals (required
+            without :obj:`face`). (default: :obj:`None`)
+        k (int, optional): Neighbours of the point-cloud Voronoi cells (at
+            least 3). (default: :obj:`8`)
+
+    Shapes:
+        - **input:** pos :math:`(N, 3)`, face :math:`(3, F)`,
+          normal :math:`(N, 3)`
+        - **output:** :math:`(N)`, positive
+    """
+    pos = check_points(pos, min_points=1)
+    if face is not None:
+        return lumped_mass(pos, face)
+    if normal is None:
+        raise ValueError("point-cloud area weights need normals: estimate "
+                         "them first, e.g. vertex_area_weights(pos, "
+                         "normal=estimate_normals(pos))")
+    normal = check_vectors(normal, 'normal', pos.size(0), pos)
+    k = check_positive_int(k, 'k', minimum=3)
+    if pos.size(0) <= k:
+        raise ValueError(f"'pos' has {pos.size(0)} points but k={k} "
+                         f"neighbours are needed per point; lower k")
+    frame = tangent_frames(normal)
+    nbr = knn(pos, k, loop=False)[0].view(-1, k)
+    area = _voronoi_areas(pos.detach().double().cpu().numpy(),
+                          frame.detach().double().cpu().numpy(),
+                          nbr.cpu().numpy())
+    if not bool(np.all(area > 0)):
+        bad = np.flatnonzero(~(area > 0))
+        raise ValueError(f"{bad.size} point(s) (first: {bad[:5].tolist()}) "
+                         f"have an empty Voronoi cell: their neighbours "
+                         f"coincide with them; remove duplicate points")
+    return torch.from_numpy(area).to(pos.dtype).to(pos.device)
+
+
+@njit(cache=True, parallel=True)
+def _voronoi_areas(pos, frame, nbr):  # pragma: no cover (numba)
+    """Tangent-plane Voronoi cell area of every point among its neighbours:
+    an octagon clipped by the bisector half-planes (Sutherland-Hodgman)."""
+    n, k = nbr.shape
+    area = np.zeros(n)
+    for i in prange(n):
+        qx = np.empty(k)
+        qy = np.empty(k)
+        mean = 0.0
+        for m in range(k):
+            d = pos[nbr[i, m]] - pos[i]
+            qx[m] = d[0] * frame[i, 0, 0] + d[1] * frame[i, 0, 1] \
+                + d[2] * frame[i, 0, 2]
+            qy[m] = d[0] * frame[i, 1, 0] + d[1] * frame[i, 1, 1] \
+                + d[2] * frame[i, 1, 2]
+            mean += np.sqrt(qx[m] ** 2 + qy[m] ** 2) / k
+        # Octagon circumscribing the circle of radius 0.6 * mean.
+        corner = 0.6 * mean / np.cos(np.pi / 8)
+        px = np.empty(k + 8)
+        py = np.empty(k + 8)
+        cx = np.empty(k + 8)
+        cy = np.empty(k + 8)
+        for t in range(8):
+            px[t] = corner * np.cos(np.pi / 8 + t * np.pi / 4)
+            py[t] = corner * np.sin(np.pi / 8 + t * np.pi / 4)
+        size = 8
+        for m in range(k):
+            c = 0.5 * (qx[m] ** 2 + qy[m] ** 2)
+            if c <= 0.0:
+                continue  # a duplicate point bounds nothing
+            out = 0
+            for t in range(size):
+                s = (t + 1) % size
+                fa = px[t] * qx[m] + py[t] * qy[m] - c
+                fb = px[s] * qx[m] + py[s] * qy[m] - c
+                if fa <= 0.0:
+                    cx[out] = px[t]
+                    cy[out] = py[t]
+                    out += 1
+                if (fa <= 0.0) != (fb <= 0.0):
+                    w = fa / (fa - fb)
+                    cx[out] = px[t] + w * (px[s] - px[t])
+                    cy[out] = py[t] + w * (py[s] - py[t])
+                    out += 1
+            size = out
+            for t in range(size):
+                px[t] = cx[t]
+                py[t] = cy[t]
+            if size < 3:
+                break
+        acc = 0.0
+        for t in range(size):
+            s = (t + 1) % size
+            acc += px[t] * py[s] - px[s] * py[t]
+        area[i] = 0.5 * abs(acc) if size >= 3 else 0.0
+    return area

@@ -1,0 +1,141 @@
+r"""Graph Voronoi diagrams: every point is assigned to its nearest seed
+along the edges of a neighbour graph (multi-source Dijkstra, compiled)."""
+from typing import Optional, Tuple
+
+import numpy as np
+import torch
+from numba import njit
+from torch import Tensor
+
+from ._checks import check_points, check_tensor
+
+
+def graph_voronoi(pos: Tensor, edge_index: Tensor, seeds: Tensor,
+                  edge_length: Optional[Tensor] = None
+                  ) -> Tuple[Tensor, Tensor]:
+    r"""Assigns every point to the seed at the smallest graph distance,
+
+    .. math::
+        c(i) = \operatorname*{arg\,min}_{s \in S} d_G(i, s),
+
+    with :math:`d_G` the shortest-path distance along the edges (lengths
+    :math:`\|p_i - p_j\|` unless given). Ties go to the seed reached first.
+    Edges are used in both directions.
+
+    Args:
+        pos (torch.Tensor): Point positions :math:`(N, 3)`.
+        edge_index (torch.Tensor): Neighbour graph :math:`(2, E)`.
+        seeds (torch.Tensor): Indices of the seeds :math:`(S)`.
+        edge_length (torch.Tensor, optional): Length of every edge
+            :math:`(E)`. (default: :obj:`None`)
+
+    Returns:
+        (cell, distance): the position in :obj:`seeds` of every point's seed
+        :math:`(N)` and its graph distance :math:`(N)`.
+
+    Raises:
+        ValueError: if some point cannot reach any seed (a component of the
+            graph without a seed): add a seed there or drop the component.
+    """
+    pos = check_points(pos)
+    edge_index = check_tensor(edge_index, 'edge_index')
+    seeds = check_tensor(seeds, 'seeds')
+    n = pos.size(0)
+    if edge_index.dim() != 2 or edge_index.size(0) != 2:
+        raise ValueError(f"'edge_index' must have shape [2, E], got "
+                         f"{list(edge_index.shape)}")
+    if seeds.numel() == 0:
+        raise ValueError("'seeds' is empty; pass at least one seed index")
+    if int(seeds.min()) < 0 or int(seeds.max()) >= n:
+        raise ValueError(f"'seeds' must index the {n} points")
+    if edge_index.numel() and (int(edge_index.min()) < 0
+                               or int(edge_index.max()) >= n):
+        raise ValueError(f"'edge_index' must index the {n} points")
+    src, dst = edge_index.cpu().numpy()
+    if edge_length is None:
+        p = pos.detach().cpu().double().numpy()
+        length = np.sqrt(((p[src] - p[dst]) ** 2).sum(1))
+    else:
+        length = edge_length.detach().cpu().double().numpy()
+        if length.shape != src.shape or not np.all(np.isfinite(length)) \
+                or (length < 0).any():
+            raise ValueError("'edge_length' must be [E], finite and "
+                             "non-negative")
+    # CSR of the symmetrised graph
+    a = np.concatenate([src, dst])
+    b = np.concatenate([dst, src])
+    w = np.concatenate([length, length])
+    order = np.argsort(a, kind='stable')
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    indptr[1:] = np.cumsum(np.bincount(a, minlength=n))
+    cell, dist = _multi_source_dijkstra(
+        indptr, b[order].astype(np.int64), w[order],
+        seeds.cpu().numpy().astype(np.int64), n)
+    if (cell < 0).any():
+        bad = np.nonzero(cell < 0)[0]
+        raise ValueError(f"{bad.size} point(s) (first: {bad[:5].tolist()}) "
+                         f"cannot reach any seed: their graph component has "
+                         f"no seed; add one there or remove the component")
+    device = pos.device
+    return (torch.from_numpy(cell).to(device),
+            torch.from_numpy(dist).to(device, pos.dtype))
+
+
+@njit(cache=True)
+def _multi_source_dijkstra(indptr, indices, weights, seeds, n
+                           ):  # pragma: no cover (numba)
+    dist = np.full(n, np.inf)
+    cell = np.full(n, -1, dtype=np.int64)
+    heap_d = np.empty(indices.size + seeds.size)
+    heap_v = np.empty(indices.size + seeds.size, dtype=np.int64)
+    size = 0
+    for s in range(seeds.size):
+        v = seeds[s]
+        if dist[v] > 0.0:
+            dist[v] = 0.0
+            cell[v] = s
+            heap_d[size], heap_v[size] = 0.0, v
+            size += 1
+    # binary heap, lazy deletion
+    for k in range(size // 2 - 1, -1, -1):
+        _sift_down(heap_d, heap_v, k, size)
+    while size > 0:
+        d, u = heap_d[0], heap_v[0]
+        size -= 1
+        heap_d[0], heap_v[0] = heap_d[size], heap_v[size]
+        _sift_down(heap_d, heap_v, 0, size)
+        if d > dist[u]:
+            continue
+        for e in range(indptr[u], indptr[u + 1]):
+            v = indices[e]
+            nd = d + weights[e]
+            if nd < dist[v]:
+                dist[v] = nd
+                cell[v] = cell[u]
+                heap_d[size], heap_v[size] = nd, v
+                k = size
+                size += 1
+                while k > 0:  # sift up
+                    parent = (k - 1) // 2
+                    if heap_d[parent] <= heap_d[k]:
+                        break
+                    heap_d[parent], heap_d[k] = heap_d[k], heap_d[parent]
+                    heap_v[parent], heap_v[k] = heap_v[k], heap_v[parent]
+                    k = parent
+    return cell, dist
+
+
+@njit(cache=True)
+def _sift_down(heap_d, heap_v, k, size):  # pragma: no cover (numba)
+    while True:
+        left = 2 * k + 1
+        if left >= size:
+            return
+        small = left
+        if left + 1 < size and heap_d[left + 1] < heap_d[left]:
+            small = left + 1
+        if heap_d[k] <= heap_d[small]:
+            return
+        heap_d[k], heap_d[small] = heap_d[small], heap_d[k]
+        heap_v[k], heap_v[small] = heap_v[small], heap_v[k]
+        k = small

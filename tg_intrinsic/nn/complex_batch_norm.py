@@ -1,0 +1,62 @@
+import torch
+from torch import Tensor
+from torch.nn import Parameter
+
+
+class ComplexBatchNorm(torch.nn.Module):
+    r"""Batch normalisation of complex stream features on their magnitudes:
+    every channel of every stream is divided by the root mean square of its
+    magnitude over all points of the batch and scaled by a learned
+    :math:`\gamma`; the phase is kept,
+
+    .. math::
+        z' = \gamma\, \frac{z}{\sqrt{\mathrm{E}[|z|^2] + \epsilon}} .
+
+    Centring would change phases, so the magnitudes are only rescaled,
+    which commutes with every gauge change. The statistics are means over
+    points, so a batch of many small shapes and one of a single large shape
+    are treated alike; in eval mode the running mean square is used.
+
+    Args:
+        channels (int): Channels :math:`C`.
+        streams (int): Streams :math:`S` (statistics per stream and
+            channel).
+        eps (float, optional): :math:`\epsilon`. (default: :obj:`1e-5`)
+        momentum (float, optional): Running-statistics momentum.
+            (default: :obj:`0.1`)
+
+    Shapes:
+        - **input / output:** complex :math:`(N, S, C)`
+    """
+    def __init__(self, channels: int, streams: int, eps: float = 1e-5,
+                 momentum: float = 0.1):
+        super().__init__()
+        self.channels = channels
+        self.streams = streams
+        self.eps = eps
+        self.momentum = momentum
+        self.weight = Parameter(torch.empty(streams, channels))
+        self.register_buffer('running_square', torch.ones(streams, channels))
+        self.reset_parameters()
+
+    def reset_parameters(self):
+        torch.nn.init.ones_(self.weight)
+        self.running_square.fill_(1.0)
+
+    def forward(self, z: Tensor) -> Tensor:
+        if z.dim() != 3 or tuple(z.shape[1:]) != (self.streams,
+                                                   self.channels):
+            raise ValueError(f"expected complex features [N, {self.streams}, "
+                             f"{self.channels}], got {list(z.shape)}")
+        if self.training and z.size(0) > 0:
+            square = (z.real ** 2 + z.imag ** 2).mean(dim=0)
+            with torch.no_grad():
+                self.running_square.lerp_(square.detach().to(
+                    self.running_square.dtype), self.momentum)
+        else:
+            square = self.running_square.to(z.real.dtype)
+        return z * (self.weight * torch.rsqrt(square + self.eps))
+
+    def __repr__(self) -> str:
+        return (f'{self.__class__.__name__}({self.channels}, '
+                f'streams={self.streams})')

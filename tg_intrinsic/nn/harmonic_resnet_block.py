@@ -1,0 +1,102 @@
+import torch
+from torch import Tensor
+
+from tg_intrinsic.geometry.harmonic import (HarmonicOperator,
+                                             harmonic_layout)
+from tg_intrinsic.nn.complex_batch_norm import ComplexBatchNorm
+from tg_intrinsic.nn.complex_linear import ComplexLinear
+from tg_intrinsic.nn.complex_relu import ComplexReLU
+from tg_intrinsic.nn.harmonic_conv import HarmonicConv
+
+
+class HarmonicResNetBlock(torch.nn.Module):
+    r"""A residual block of Harmonic Surface Networks: two harmonic
+    convolutions with C-ReLU, and a skip connection (a
+    :class:`ComplexLinear` without bias when the widths differ),
+
+    .. math::
+        \mathbf{z}' = \sigma\Big(\mathrm{BN}\big(
+        \mathrm{conv}_2(\sigma(\mathrm{BN}(\mathrm{conv}_1 \mathbf{z})))
+        \big) + S\mathbf{z}\Big).
+
+    Args:
+        in_channels (int): Input channels per stream.
+        out_channels (int): Output channels per stream.
+        max_order (int, optional): Highest order of both convolutions.
+            (default: :obj:`1`)
+        rings (int, optional): Rings of the radial profiles.
+            (default: :obj:`6`)
+        prev_order (int, optional): Highest input order.
+            (default: :obj:`1`)
+        batch_norm (bool, optional): Use :class:`ComplexBatchNorm` after each
+            convolution. (default: :obj:`True`)
+        separate_streams (bool, optional): See :class:`HarmonicConv`.
+            (default: :obj:`True`)
+
+    Shapes:
+        - **input:** complex :math:`(N, P + 1, C_{in})`, and the disc
+          operator of the level (:class:`HarmonicOperator` built for
+          :math:`P + 1 \to O + 1` and :math:`O + 1 \to O + 1` orders, or
+          the per-edge data)
+        - **output:** complex :math:`(N, O + 1, C_{out})`
+    """
+    def __init__(self, in_channels: int, out_channels: int,
+                 max_order: int = 1, rings: int = 6, prev_order: int = 1,
+                 batch_norm: bool = True, separate_streams: bool = True):
+        super().__init__()
+        self.in_channels = in_channels
+        self.out_channels = out_channels
+        self.max_order = max_order
+        self.prev_order = prev_order
+        self.conv1 = HarmonicConv(in_channels, out_channels, max_order, rings,
+                                  prev_order,
+                                  separate_streams=separate_streams)
+        self.conv2 = HarmonicConv(out_channels, out_channels, max_order,
+                                  rings, max_order,
+                                  separate_streams=separate_streams)
+        self.act1 = ComplexReLU(out_channels)
+        self.act2 = ComplexReLU(out_channels)
+        streams = max_order + 1
+        self.norm1 = ComplexBatchNorm(out_channels, streams) \
+            if batch_norm else torch.nn.Identity()
+        self.norm2 = ComplexBatchNorm(out_channels, streams) \
+            if batch_norm else torch.nn.Identity()
+        self.skip = ComplexLinear(in_channels, out_channels, bias=False) \
+            if in_channels != out_channels else torch.nn.Identity()
+
+    def reset_parameters(self):
+        for module in self.modules():
+            if module is not self and hasattr(module, 'reset_parameters'):
+                module.reset_parameters()
+
+    def forward(self, z: Tensor, operators: dict) -> Tensor:
+        """``operators`` maps ``(in_orders, out_orders)`` to the
+        :class:`HarmonicOperator` of this level (see
+        :func:`harmonic_operators`)."""
+        p, o = self.prev_order + 1, self.max_order + 1
+        h = self.act1(self.norm1(self.conv1(z, operator=operators[(p, o)])))
+        h = self.norm2(self.conv2(h, operator=operators[(o, o)]))
+        skip = z
+        if p != o:  # streams the input lacks are 0; extra ones are dropped
+            skip = torch.cat([z, z.new_zeros(z.size(0), max(0, o - p),
+                                              z.size(2))], 1)[:, :o]
+        return self.act2(h + self.skip(skip))
+
+    def __repr__(self) -> str:
+        return (f'{self.__class__.__name__}({self.in_channels}, '
+                f'{self.out_channels}, max_order={self.max_order}, '
+                f'prev_order={self.prev_order})')
+
+
+def harmonic_operators(edge_index: Tensor, harmonic: Tensor,
+                       transport: Tensor, num_nodes: int, pairs
+                       ) -> dict:
+    """The :class:`HarmonicOperator` of one level for every
+    ``(in_orders, out_orders)`` pair that its layers use."""
+    layout = harmonic_layout(edge_index, harmonic, num_nodes)
+    return {pair: HarmonicOperator(edge_index, harmonic, transport,
+                                   num_nodes, *pair, layout=layout)
+            for pair in set(pairs)}
+
+
+__all__ = ['HarmonicResNetBlock', 'harmonic_operators']

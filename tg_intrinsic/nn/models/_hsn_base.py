@@ -1,0 +1,49 @@
+from typing import Dict, Iterable, Tuple
+
+import torch
+from torch import Tensor
+from torch_geometric.data import Data
+
+from tg_intrinsic.nn.harmonic_resnet_block import harmonic_operators
+
+
+def level_key(name: str, level: int) -> str:
+    return name if level == 0 else f'{name}_{level}'
+
+
+def level_operators(data: Data, level: int, num_nodes: int,
+                    pairs: Iterable[Tuple[int, int]]) -> Dict:
+    """The harmonic operators of one level of a (batched) data object,
+    built once per forward and shared by the level's layers."""
+    needed = ('edge_index', 'harmonic', 'transport')
+    missing = [level_key(k, level) for k in needed
+               if getattr(data, level_key(k, level), None) is None]
+    if missing:
+        raise ValueError(f"the data lacks {missing}; build it with LogMap, "
+                         f"ParallelTransport, MultiscaleSupports and "
+                         f"HarmonicPrecompute (see HSNClassification)")
+    return harmonic_operators(
+        data[level_key('edge_index', level)],
+        data[level_key('harmonic', level)],
+        data[level_key('transport', level)], num_nodes, pairs)
+
+
+def pooling(data: Data, level: int) -> Tuple[Tensor, Tensor, int]:
+    """``cluster_l``, ``pool_transport_l`` and the size of level ``l``."""
+    for key in (f'cluster_{level}', f'pool_transport_{level}'):
+        if getattr(data, key, None) is None:
+            raise ValueError(f"the data lacks '{key}'; build the pooling "
+                             f"levels with MultiscaleSupports")
+    size = data.level_size(level) if hasattr(data, 'level_size') \
+        else data[f'pos_{level}'].size(0)
+    return data[f'cluster_{level}'], data[f'pool_transport_{level}'], size
+
+
+def lift(x: Tensor) -> Tensor:
+    """Real ``[N, C]`` features as the complex stream 0 ``[N, 1, C]``."""
+    return torch.complex(x, torch.zeros_like(x)).unsqueeze(1)
+
+
+def invariant(z: Tensor) -> Tensor:
+    """Gauge-invariant read-out: magnitudes summed over the streams."""
+    return z.abs().sum(dim=1)

@@ -1,0 +1,100 @@
+from typing import Sequence
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+from torch_geometric.data import Data
+from torch_geometric.nn import global_mean_pool
+
+from tg_intrinsic.nn.harmonic_conv import HarmonicConv
+from tg_intrinsic.nn.harmonic_resnet_block import HarmonicResNetBlock
+from tg_intrinsic.nn.models._hsn_base import (invariant, level_operators,
+                                              lift, pooling)
+from tg_intrinsic.pool import ParallelTransportPool
+
+
+class HSNClassification(torch.nn.Module):
+    r"""Harmonic Surface Network for shape classification, from the `"CNNs
+    on Surfaces using Rotation-Equivariant Features"
+    <https://doi.org/10.1145/3386569.3392437>`_ paper: the encoder half of
+    the U-ResNet. A linear lift of the input to stream 0, a
+    :class:`HarmonicResNetBlock` on level 0, parallel-transport pooling, a
+    block on level 1, a last :class:`HarmonicConv` to :math:`C` channels,
+    the magnitudes of its streams (gauge invariant) and a global mean:
+
+    .. math::
+        \hat{y} = \frac{1}{n_1} \sum_{i} \sum_{M} \big|
+        \mathrm{conv}(\mathrm{block}_1(\mathrm{pool}(
+        \mathrm{block}_0(\mathbf{x}))))_i^M \big| + \mathbf{b}.
+
+    The data must carry the disc graphs of levels 0 and 1 (``edge_index``,
+    ``harmonic``, ``transport`` and their ``_1`` versions) and the pooling
+    (``cluster_1``, ``pool_transport_1``), as written by
+    :class:`~tg_intrinsic.transforms.LogMap`,
+    :class:`~tg_intrinsic.transforms.ParallelTransport`,
+    :class:`~tg_intrinsic.transforms.MultiscaleSupports` and
+    :class:`~tg_intrinsic.transforms.HarmonicPrecompute`.
+
+    Args:
+        in_channels (int): Input features per point (``data.x``, else
+            ``data.pos``).
+        num_classes (int): Number of classes :math:`C`.
+        channels (Sequence[int], optional): Features on levels 0 and 1.
+            (default: :obj:`(16, 32)`)
+        max_order (int, optional): Highest rotation order; :obj:`0` gives
+            the one-stream ablation. (default: :obj:`1`)
+        rings (int, optional): Rings of the radial profiles (as
+            precomputed). (default: :obj:`6`)
+
+    Shapes:
+        - **input:** a (batched) :class:`~tg_intrinsic.data.IntrinsicData`
+        - **output:** logits :math:`(B, C)`
+    """
+    def __init__(self, in_channels: int, num_classes: int,
+                 channels: Sequence[int] = (16, 32), max_order: int = 1,
+                 rings: int = 6):
+        super().__init__()
+        c0, c1 = channels
+        self.in_channels = in_channels
+        self.num_classes = num_classes
+        self.channels = (c0, c1)
+        self.max_order = max_order
+        self.rings = rings
+        self.lin = torch.nn.Linear(in_channels, c0)
+        self.block0 = HarmonicResNetBlock(c0, c0, max_order, rings,
+                                          prev_order=0)
+        self.pool = ParallelTransportPool()
+        self.block1 = HarmonicResNetBlock(c0, c1, max_order, rings,
+                                          prev_order=max_order)
+        self.conv = HarmonicConv(c1, num_classes, max_order, rings,
+                                 prev_order=max_order, offset=False)
+        self.bias = torch.nn.Parameter(torch.zeros(num_classes))
+
+    def reset_parameters(self):
+        for module in (self.lin, self.block0, self.block1, self.conv):
+            module.reset_parameters()
+        torch.nn.init.zeros_(self.bias)
+
+    def forward(self, data: Data) -> Tensor:
+        x = getattr(data, 'x', None)
+        x = data.pos if x is None else x
+        if x.size(-1) != self.in_channels:
+            raise ValueError(f"the model expects {self.in_channels} input "
+                             f"channels, data.x (or data.pos) has "
+                             f"{x.size(-1)}")
+        o = self.max_order + 1
+        ops0 = level_operators(data, 0, x.size(0), [(1, o), (o, o)])
+        z = self.block0(lift(F.relu(self.lin(x))), ops0)
+        cluster, angle, n1 = pooling(data, 1)
+        z = self.pool(z, cluster, angle, n1)
+        ops1 = level_operators(data, 1, n1, [(o, o)])
+        z = self.block1(z, ops1)
+        z = self.conv(z, operator=ops1[(o, o)])
+        batch = data.level_batch(1) if hasattr(data, 'level_batch') else \
+            torch.zeros(n1, dtype=torch.long, device=z.device)
+        return global_mean_pool(invariant(z), batch) + self.bias
+
+    def __repr__(self) -> str:
+        return (f'{self.__class__.__name__}({self.in_channels}, '
+                f'{self.num_classes}, channels={self.channels}, '
+                f'max_order={self.max_order}, rings={self.rings})')

@@ -1,0 +1,106 @@
+from typing import Sequence
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+from torch_geometric.data import Data
+
+from tg_intrinsic.nn.harmonic_conv import HarmonicConv
+from tg_intrinsic.nn.harmonic_resnet_block import HarmonicResNetBlock
+from tg_intrinsic.nn.models._hsn_base import (invariant, level_operators,
+                                              lift, pooling)
+from tg_intrinsic.pool import ParallelTransportPool, ParallelTransportUnpool
+
+
+class HSNSegmentation(torch.nn.Module):
+    r"""Harmonic Surface Network for per-vertex segmentation, from the
+    `"CNNs on Surfaces using Rotation-Equivariant Features"
+    <https://doi.org/10.1145/3386569.3392437>`_ paper: a two-level U-ResNet
+    of :class:`HarmonicResNetBlock` (two per level and in the decoder),
+    parallel-transport pooling and unpooling, a skip connection by
+    concatenation, and a last :class:`HarmonicConv` whose stream magnitudes
+    are the (gauge-invariant) logits:
+
+    .. math::
+        \hat{y}_i = \sum_M \big| \mathrm{conv}\big(\mathrm{dec}\big(
+        [\mathbf{z}^{(0)} \,\|\, \mathrm{unpool}(\mathrm{enc}_1(
+        \mathrm{pool}(\mathbf{z}^{(0)})))]\big)\big)_i^M \big| + \mathbf{b},
+        \qquad \mathbf{z}^{(0)} = \mathrm{enc}_0(\mathbf{x}).
+
+    Needs the same data as :class:`HSNClassification`.
+
+    Args:
+        in_channels (int): Input features per point (``data.x``, else
+            ``data.pos``).
+        num_classes (int): Number of part classes :math:`C`.
+        channels (Sequence[int], optional): Features on levels 0 and 1.
+            (default: :obj:`(16, 32)`)
+        max_order (int, optional): Highest rotation order; :obj:`0` gives
+            the one-stream ablation. (default: :obj:`1`)
+        rings (int, optional): Rings of the radial profiles.
+            (default: :obj:`6`)
+
+    Shapes:
+        - **input:** a (batched) :class:`~tg_intrinsic.data.IntrinsicData`
+        - **output:** logits :math:`(N, C)`
+    """
+    def __init__(self, in_channels: int, num_classes: int,
+                 channels: Sequence[int] = (16, 32), max_order: int = 1,
+                 rings: int = 6):
+        super().__init__()
+        c0, c1 = channels
+        self.in_channels = in_channels
+        self.num_classes = num_classes
+        self.channels = (c0, c1)
+        self.max_order = max_order
+        self.rings = rings
+        p = max_order
+        self.lin = torch.nn.Linear(in_channels, c0)
+        self.enc0 = torch.nn.ModuleList([
+            HarmonicResNetBlock(c0, c0, p, rings, prev_order=0),
+            HarmonicResNetBlock(c0, c0, p, rings, prev_order=p)])
+        self.enc1 = torch.nn.ModuleList([
+            HarmonicResNetBlock(c0, c1, p, rings, prev_order=p),
+            HarmonicResNetBlock(c1, c1, p, rings, prev_order=p)])
+        self.dec0 = torch.nn.ModuleList([
+            HarmonicResNetBlock(c0 + c1, c0, p, rings, prev_order=p),
+            HarmonicResNetBlock(c0, c0, p, rings, prev_order=p)])
+        self.pool = ParallelTransportPool()
+        self.unpool = ParallelTransportUnpool()
+        self.conv = HarmonicConv(c0, num_classes, p, rings, prev_order=p,
+                                 offset=False)
+        self.bias = torch.nn.Parameter(torch.zeros(num_classes))
+
+    def reset_parameters(self):
+        for module in [self.lin, self.conv, *self.enc0, *self.enc1,
+                       *self.dec0]:
+            module.reset_parameters()
+        torch.nn.init.zeros_(self.bias)
+
+    def forward(self, data: Data) -> Tensor:
+        x = getattr(data, 'x', None)
+        x = data.pos if x is None else x
+        if x.size(-1) != self.in_channels:
+            raise ValueError(f"the model expects {self.in_channels} input "
+                             f"channels, data.x (or data.pos) has "
+                             f"{x.size(-1)}")
+        o = self.max_order + 1
+        ops0 = level_operators(data, 0, x.size(0), [(1, o), (o, o)])
+        z = lift(F.relu(self.lin(x)))
+        for block in self.enc0:
+            z = block(z, ops0)
+        cluster, angle, n1 = pooling(data, 1)
+        ops1 = level_operators(data, 1, n1, [(o, o)])
+        coarse = self.pool(z, cluster, angle, n1)
+        for block in self.enc1:
+            coarse = block(coarse, ops1)
+        z = torch.cat([z, self.unpool(coarse, cluster, angle)], dim=2)
+        for block in self.dec0:
+            z = block(z, ops0)
+        z = self.conv(z, operator=ops0[(o, o)])
+        return invariant(z) + self.bias
+
+    def __repr__(self) -> str:
+        return (f'{self.__class__.__name__}({self.in_channels}, '
+                f'{self.num_classes}, channels={self.channels}, '
+                f'max_order={self.max_order}, rings={self.rings})')

@@ -1,0 +1,55 @@
+from typing import Optional
+
+import torch
+from torch import Tensor
+
+from tg_intrinsic.geometry.harmonic import transport_features
+
+
+class ParallelTransportPool(torch.nn.Module):
+    r"""Pooling of complex stream features onto coarse points (Harmonic
+    Surface Networks): every fine point :math:`j` belongs to the cluster of
+    its geodesically nearest sample :math:`c(j)`, and a cluster takes the
+    mean of its points' features after parallel transport into the
+    sample's frame,
+
+    .. math::
+        x_c^M = \frac{1}{|\{j : c(j) = c\}|} \sum_{j : c(j) = c}
+        e^{iM\phi_{j \to c}}\, x_j^M .
+
+    Args:
+        reduce (str, optional): :obj:`'mean'` or :obj:`'sum'`.
+            (default: :obj:`'mean'`)
+
+    Shapes:
+        - **input:** x complex :math:`(N, S, C)`, cluster :math:`(N)`,
+          transport :math:`(N)` (angle :math:`\phi_{j \to c(j)}`, e.g.
+          ``data.pool_transport_1``)
+        - **output:** complex :math:`(N_c, S, C)`
+    """
+    def __init__(self, reduce: str = 'mean'):
+        super().__init__()
+        if reduce not in ('mean', 'sum'):
+            raise ValueError(f"reduce must be 'mean' or 'sum', got "
+                             f"{reduce!r}")
+        self.reduce = reduce
+
+    def forward(self, x: Tensor, cluster: Tensor, transport: Tensor,
+                num_clusters: Optional[int] = None) -> Tensor:
+        if cluster.shape != (x.size(0),) or transport.shape != (x.size(0),):
+            raise ValueError(f"'cluster' and 'transport' need one entry per "
+                             f"fine point ({x.size(0)}), got "
+                             f"{list(cluster.shape)} and "
+                             f"{list(transport.shape)}")
+        if num_clusters is None:
+            num_clusters = int(cluster.max()) + 1 if cluster.numel() else 0
+        moved = transport_features(x, transport)
+        out = moved.new_zeros((num_clusters,) + tuple(x.shape[1:]))
+        out = out.index_add(0, cluster, moved)
+        if self.reduce == 'mean':
+            count = torch.bincount(cluster, minlength=num_clusters)
+            out = out / count.clamp(min=1).view(-1, 1, 1).to(out.real.dtype)
+        return out
+
+    def __repr__(self) -> str:
+        return f'{self.__class__.__name__}(reduce={self.reduce!r})'

@@ -33,6 +33,8 @@ import torch
 from torch import Tensor
 
 from ._checks import check_positive_float, check_positive_int, check_tensor
+# A^H is what complex autograd needs in the backward pass.
+from .operators import _SparseMM
 
 
 def ring_weights(r: Tensor, radius: float, rings: int) -> Tensor:
@@ -121,18 +123,6 @@ def harmonic_terms(edge_index: Tensor, logmap: Tensor, weight: Tensor,
     return (w.unsqueeze(1) * mu).unsqueeze(2) * phase.unsqueeze(1)
 
 
-class _ComplexSparseMM(torch.autograd.Function):
-    """``A @ x`` with the backward through a precomputed ``A^H``."""
-    @staticmethod
-    def forward(ctx, matrix: Tensor, adjoint: Tensor, x: Tensor):
-        ctx.adjoint = adjoint
-        return torch.sparse.mm(matrix, x)
-
-    @staticmethod
-    def backward(ctx, grad_out: Tensor):
-        return None, None, torch.sparse.mm(ctx.adjoint, grad_out)
-
-
 class HarmonicOperator:
     r"""The neighbourhood aggregation of a harmonic convolution as one
     sparse complex matrix, built once per (batched) disc graph and shared
@@ -213,7 +203,7 @@ class HarmonicOperator:
         r"""``[N, P + 1, C]`` complex -> ``[N, Q, P + 1, O + 1, C]``."""
         c = x.size(-1)
         flat = x.reshape(self.num_nodes * self.in_orders, c)
-        out = _ComplexSparseMM.apply(self.matrix, self.adjoint, flat)
+        out = _SparseMM.apply(self.matrix, self.adjoint, flat)
         return out.view(self.num_nodes, self.rings, self.in_orders,
                         self.out_orders, c)
 

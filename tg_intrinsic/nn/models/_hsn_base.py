@@ -39,6 +39,16 @@ def pooling(data: Data, level: int) -> Tuple[Tensor, Tensor, int]:
     return data[f'cluster_{level}'], data[f'pool_transport_{level}'], size
 
 
+def input_features(data: Data, in_channels: int) -> Tensor:
+    """``data.x``, else ``data.pos``, checked against the model's width."""
+    x = getattr(data, 'x', None)
+    x = data.pos if x is None else x
+    if x.size(-1) != in_channels:
+        raise ValueError(f"the model expects {in_channels} input channels, "
+                         f"data.x (or data.pos) has {x.size(-1)}")
+    return x
+
+
 def lift(x: Tensor) -> Tensor:
     """Real ``[N, C]`` features as the complex stream 0 ``[N, 1, C]``."""
     return torch.complex(x, torch.zeros_like(x)).unsqueeze(1)

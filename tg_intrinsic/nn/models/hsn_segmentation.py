@@ -7,8 +7,9 @@ from torch_geometric.data import Data
 
 from tg_intrinsic.nn.harmonic_conv import HarmonicConv
 from tg_intrinsic.nn.harmonic_resnet_block import HarmonicResNetBlock
-from tg_intrinsic.nn.models._hsn_base import (invariant, level_operators,
-                                              lift, pooling)
+from tg_intrinsic.nn.models._hsn_base import (input_features, invariant,
+                                              level_operators, lift,
+                                              pooling)
 from tg_intrinsic.pool import ParallelTransportPool, ParallelTransportUnpool
 
 
@@ -78,12 +79,7 @@ class HSNSegmentation(torch.nn.Module):
         torch.nn.init.zeros_(self.bias)
 
     def forward(self, data: Data) -> Tensor:
-        x = getattr(data, 'x', None)
-        x = data.pos if x is None else x
-        if x.size(-1) != self.in_channels:
-            raise ValueError(f"the model expects {self.in_channels} input "
-                             f"channels, data.x (or data.pos) has "
-                             f"{x.size(-1)}")
+        x = input_features(data, self.in_channels)
         o = self.max_order + 1
         ops0 = level_operators(data, 0, x.size(0), [(1, o), (o, o)])
         z = lift(F.relu(self.lin(x)))

@@ -14,6 +14,7 @@ Usage: python benchmarks/hsn_accuracy.py [--epochs 40]
 Writes benchmarks/results/hsn_accuracy.json and .png.
 """
 import argparse
+import json
 import os
 
 import matplotlib
@@ -36,7 +37,12 @@ def main():
     parser.add_argument('--epochs', type=int, default=40)
     parser.add_argument('--method', default='fast')
     parser.add_argument('--out', default=os.path.join(HERE, 'results'))
+    parser.add_argument('--plot-only', action='store_true',
+                        help='redraw the PNG from the JSON')
     args = parser.parse_args()
+    if args.plot_only:
+        with open(os.path.join(args.out, 'hsn_accuracy.json')) as f:
+            return plot(json.load(f), args.out)
     results = {'machine': machine_info(), 'epochs': args.epochs,
                'protocol': 'SyntheticSHREC meshes of 300-500 vertices, 10 '
                            'training shapes per class, radii 0.2 / 0.4, '
@@ -66,6 +72,10 @@ def main():
                 'history': metrics['history']})
             atomic_write_json(os.path.join(args.out, 'hsn_accuracy.json'),
                               results)
+    plot(results, args.out)
+
+
+def plot(results, out):
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for ax, task in zip(axes, ('classification', 'segmentation')):
         for run in results['runs']:
@@ -82,7 +92,7 @@ def main():
         ax.set_ylim(0, 1)
         ax.legend()
     fig.tight_layout()
-    fig.savefig(os.path.join(args.out, 'hsn_accuracy.png'), dpi=120)
+    fig.savefig(os.path.join(out, 'hsn_accuracy.png'), dpi=120)
 
 
 if __name__ == '__main__':

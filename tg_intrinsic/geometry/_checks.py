@@ -151,3 +151,23 @@ def check_nondegenerate(area: Tensor, scale: Tensor, name: str = 'face'):
                          f"triangle(s) (first: {bad[:5].tolist()}); remove "
                          f"them, e.g. with trimesh's "
                          f"update_faces(mesh.nondegenerate_faces())")
+
+
+def check_edge_index(edge_index, num: int, ref: Tensor) -> Tensor:
+    """Validates an ``edge_index [2, E]``: long, on ``ref``'s device, in
+    range."""
+    edge_index = check_tensor(edge_index, 'edge_index')
+    if edge_index.dim() != 2 or edge_index.size(0) != 2:
+        raise ValueError(f"'edge_index' must have shape [2, E], got "
+                         f"{list(edge_index.shape)}")
+    if edge_index.dtype != torch.long:
+        raise ValueError(f"'edge_index' must be torch.long, got "
+                         f"{edge_index.dtype}")
+    same_device(edge_index, 'edge_index', ref)
+    if edge_index.numel() > 0:
+        lo, hi = int(edge_index.min()), int(edge_index.max())
+        if lo < 0 or hi >= num:
+            raise ValueError(f"'edge_index' holds indices in [{lo}, {hi}], "
+                             f"outside [0, {num}): there are only {num} "
+                             f"points")
+    return edge_index

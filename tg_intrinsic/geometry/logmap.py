@@ -31,9 +31,9 @@ from numba import njit, prange
 from torch import Tensor
 
 from . import _vector_heat
-from ._checks import (check_faces, check_nondegenerate, check_points,
-                      check_positive_float, check_positive_int, check_tensor,
-                      check_vectors, same_device)
+from ._checks import (check_edge_index, check_faces, check_nondegenerate,
+                      check_points, check_positive_float, check_positive_int,
+                      check_tensor, check_vectors, same_device)
 from ._fmm import march_from, surface_index
 from .frames import check_frames, tangent_frames
 from .mesh import edge_face_counts, face_areas, lumped_mass, vertex_normals
@@ -87,23 +87,6 @@ def _check_mesh(pos: Tensor, face, strict: bool = False) -> Tensor:
                              "method needs an oriented manifold mesh, e.g. "
                              "fix it with trimesh's fix_winding()")
     return face
-
-
-def _check_edge_index(edge_index, num: int, ref: Tensor) -> Tensor:
-    edge_index = check_tensor(edge_index, 'edge_index')
-    if edge_index.dim() != 2 or edge_index.size(0) != 2:
-        raise ValueError(f"'edge_index' must have shape [2, E], got "
-                         f"{list(edge_index.shape)}")
-    if edge_index.dtype != torch.long:
-        raise ValueError(f"'edge_index' must be torch.long, got "
-                         f"{edge_index.dtype}")
-    same_device(edge_index, 'edge_index', ref)
-    if edge_index.numel() > 0:
-        lo, hi = int(edge_index.min()), int(edge_index.max())
-        if lo < 0 or hi >= num:
-            raise ValueError(f"'edge_index' holds indices in [{lo}, {hi}] "
-                             f"but there are only {num} points")
-    return edge_index
 
 
 def _check_centers(centers, pos: Tensor) -> Tensor:
@@ -491,7 +474,7 @@ def log_map(pos: Tensor, edge_index: Tensor, frame: Optional[Tensor] = None,
           dtype and device
     """
     pos = check_points(pos, min_points=1)
-    edge_index = _check_edge_index(edge_index, pos.size(0), pos)
+    edge_index = check_edge_index(edge_index, pos.size(0), pos)
     if method not in METHODS:
         raise ValueError(f"'method' must be one of {METHODS}, got "
                          f"{method!r}")

@@ -24,8 +24,8 @@ import torch
 from numba import njit, prange
 from torch import Tensor
 
-from ._checks import (check_batch, check_points, check_positive_float,
-                      check_tensor, same_device)
+from ._checks import (check_batch, check_edge_index, check_points,
+                      check_positive_float, check_tensor, same_device)
 
 #: Monomials of the quadratic fit: 1, u, v, u^2, sqrt(2) uv, v^2. The factor
 #: sqrt(2) makes the Tikhonov term rotation invariant (the quadratic part is a
@@ -43,22 +43,6 @@ def _scatter_sum(src: Tensor, index: Tensor, size: int) -> Tensor:
 def _monomials(u: Tensor, v: Tensor) -> Tensor:
     return torch.stack([torch.ones_like(u), u, v, u * u, SQRT2 * u * v, v * v],
                        -1)
-
-
-def check_edge_index(edge_index, num_nodes: int, ref: Tensor) -> Tensor:
-    """Validates an ``edge_index [2, E]`` (long, in range)."""
-    edge_index = check_tensor(edge_index, 'edge_index')
-    if edge_index.dim() != 2 or edge_index.size(0) != 2:
-        raise ValueError(f"'edge_index' must have shape [2, E], got "
-                         f"{list(edge_index.shape)}")
-    if edge_index.dtype != torch.long:
-        raise ValueError(f"'edge_index' must be torch.long, got "
-                         f"{edge_index.dtype}")
-    same_device(edge_index, 'edge_index', ref)
-    if edge_index.numel() > 0 and (int(edge_index.min()) < 0
-                                   or int(edge_index.max()) >= num_nodes):
-        raise ValueError(f"'edge_index' points outside [0, {num_nodes})")
-    return edge_index
 
 
 def mls_grad_div(pos: Tensor, frame: Tensor, edge_index: Tensor,

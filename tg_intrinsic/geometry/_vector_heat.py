@@ -1,4 +1,4 @@
-r"""Vector heat log maps and transport on local patches (potpourri3d).
+r"""Vector heat log maps and transport on local patches.
 
 Private back end of :func:`tg_intrinsic.geometry.log_map` with
 ``method='vector_heat'``. The original Harmonic Surface Networks code solves
@@ -8,10 +8,14 @@ short-time, so the result inside a disc barely depends on the surface far
 outside it: the influence of a patch rim at distance b decays like
 exp(-2 b / h) for the diffusion time t = h^2 (h the mean edge length).
 Here the centres are grouped around seeds, every group is solved on the
-patch of vertices within a band of ``margin * h`` around its discs (one
-factorisation per patch, the diffusion time of the whole surface), and only
-the entries of the requested edges are kept. Large jobs run the patches in
-worker processes.
+patch within a band of ``margin * h`` around its discs (one factorisation
+per patch, the diffusion time of the whole surface), or on the whole
+component where a cost model says so, and only the entries of the requested
+edges are kept. Meshes use our own solver (:mod:`._affine_heat`, blocks of
+centres in threads); point clouds use potpourri3d's point-cloud solver, with
+large jobs in worker processes. :func:`_mesh_conversion` and
+:func:`_solve_centres` also turn potpourri3d's mesh solver into the
+original's per-vertex answer, which the tests and benchmarks compare with.
 
 Everything here is numpy on the CPU; the public wrapper converts tensors.
 """
@@ -27,20 +31,24 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
+from ._affine_heat import AffineHeatPatch, MeshTangentData
 from ._fmm import march_one, surface_index
 
 # Group spacing as a fraction of the typical disc-plus-band radius: larger
 # groups share one factorisation among more centres but solve on bigger
 # patches (measured on 10k-vertex meshes: 0.2-0.3 is best, flat around it).
 GROUP_FRACTION = 0.3
-# Above this much estimated work (centres x patch vertices), patches are
-# farmed out to worker processes; below it, starting them costs more.
+# Above this much estimated work (centres x patch vertices), point-cloud
+# patches are farmed out to worker processes; below it, starting them
+# costs more.
 POOL_WORK = 1.5e7
 # 'auto' solves on patches unless the cost model (:func:`solve_cost`) says
 # that whole components are cheaper; 'patches' and 'whole' force a choice.
 PLAN = 'auto'
 
 _STATE: Dict = {}
+_THREAD_VARIABLES = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS',
+                     'MKL_NUM_THREADS', 'NUMBA_NUM_THREADS')
 
 
 def _log_map_kwargs():
@@ -66,10 +74,11 @@ def init_state(kind: str, pos: np.ndarray, face, frame: np.ndarray,
     """Stores the surface in this process (the worker initializer).
     ``spacing`` is :func:`mean_spacing` of the whole surface."""
     _STATE.clear()
-    _STATE.update(kind=kind, pos=pos, face=face, frame=frame, spacing=spacing,
-                  log_kwargs=_log_map_kwargs() if kind == 'mesh' else {})
+    _STATE.update(kind=kind, pos=pos, face=face, frame=frame, spacing=spacing)
     if kind == 'mesh':
         _STATE['index'] = surface_index(pos, face)
+        _STATE['label'] = _components(face, pos.shape[0])
+        _STATE['tangent'] = MeshTangentData(pos, face, frame)
     else:
         _STATE['tree'] = cKDTree(pos)
 
@@ -77,41 +86,6 @@ def init_state(kind: str, pos: np.ndarray, face, frame: np.ndarray,
 # ----------------------------------------------------------------------------
 # patch extraction
 # ----------------------------------------------------------------------------
-def split_nonmanifold_vertices(face: np.ndarray, num_vertices: int):
-    """Gives every edge-connected fan of triangles around a vertex its own
-    copy of the vertex. Cutting a patch out of a manifold mesh leaves
-    "bow-tie" vertices on its rim, whose fans touch only at the vertex;
-    geometry-central rejects those. Returns ``(face, source)``: the new
-    triangles and, for every new vertex, the vertex it copies (the first
-    fan keeps the original index, copies are appended)."""
-    nf = face.shape[0]
-    corner_v = face.T.reshape(-1)  # corner c = s * nf + f
-    nxt = np.roll(face, -1, axis=1).T.reshape(-1)
-    prv = np.roll(face, -2, axis=1).T.reshape(-1)
-    # Two corners of one vertex are in the same fan when they share an edge
-    # (v, u): join corners that have an equal key v * N + u.
-    key = np.concatenate([corner_v * num_vertices + nxt,
-                          corner_v * num_vertices + prv])
-    corner = np.tile(np.arange(3 * nf), 2)
-    order = np.argsort(key, kind='stable')
-    key, corner = key[order], corner[order]
-    same = key[1:] == key[:-1]
-    graph = sp.coo_matrix((np.ones(int(same.sum())),
-                           (corner[:-1][same], corner[1:][same])),
-                          shape=(3 * nf, 3 * nf))
-    num_fans, fan = connected_components(graph, directed=False)
-    fan_vertex = np.empty(num_fans, dtype=np.int64)
-    fan_vertex[fan] = corner_v
-    order = np.argsort(fan_vertex, kind='stable')
-    first = np.ones(num_fans, dtype=bool)
-    first[order[1:]] = fan_vertex[order[1:]] != fan_vertex[order[:-1]]
-    new_index = fan_vertex.copy()
-    extra = np.flatnonzero(~first)
-    new_index[extra] = num_vertices + np.arange(extra.size)
-    source = np.concatenate([np.arange(num_vertices), fan_vertex[extra]])
-    return new_index[fan].reshape(3, nf).T.copy(), source
-
-
 def _components(face: np.ndarray, num_vertices: int):
     rows = face.reshape(-1)
     cols = np.roll(face, 1, axis=1).reshape(-1)
@@ -120,21 +94,11 @@ def _components(face: np.ndarray, num_vertices: int):
     return connected_components(graph, directed=False)[1]
 
 
-def _reindex(face: np.ndarray, keep: np.ndarray):
-    """Faces with all corners in ``keep`` (bool mask), compacted; and the
-    kept vertex of every new index."""
-    face = face[keep[face].all(axis=1)]
-    used = np.unique(face)
-    remap = np.full(keep.shape[0], -1, dtype=np.int64)
-    remap[used] = np.arange(used.size)
-    return remap[face], used
-
-
 # ----------------------------------------------------------------------------
 # frame conversion: geometry-central's vertex tangent spaces -> our frames
 # ----------------------------------------------------------------------------
 def _wrap(angle: np.ndarray) -> np.ndarray:
-    return np.angle(np.exp(1j * angle))
+    return np.mod(angle + np.pi, 2 * np.pi) - np.pi
 
 
 def _mesh_conversion(V, F, global_index, frame, basis_x, basis_n):
@@ -276,60 +240,29 @@ def run_job(job):
 
 
 def _run_mesh_job(job):
-    import potpourri3d as pp3d
-    pos, face, frame = _STATE['pos'], _STATE['face'], _STATE['frame']
-    n = pos.shape[0]
-    centres, ptr, nbr = job['centres'], job['ptr'], job['nbr']
-    # The patch: every vertex within the band of some disc of the group.
-    sources = np.union1d(centres, nbr)
-    ball, _ = march_one(face, _STATE['index'], sources, job['band'])
-    inside = np.zeros(n, dtype=bool)
-    inside[ball] = True
-    sub_face, used = _reindex(face, inside)
-    sub_face, source = split_nonmanifold_vertices(sub_face, used.size)
-    global_of = used[source]
-    local = np.full(n, -1, dtype=np.int64)
-    local[used] = np.arange(used.size)  # originals, not rim copies
-    label = _components(sub_face, global_of.size) if sub_face.size else \
-        np.arange(global_of.size)
-    c_loc = local[centres]
-    n_loc = local[nbr]
+    """Solves the centres of one job on its patch (our own affine heat
+    solves, :class:`AffineHeatPatch`). Returns ``(edge_id, r, psi, beta,
+    failed)`` for the edges of the centres that succeeded."""
+    sources, ptr, targets = job['centres'], job['ptr'], job['nbr']
+    tangent = _STATE['tangent']
+    inside = np.zeros(_STATE['pos'].shape[0], dtype=bool)
+    if math.isinf(job['band']):
+        inside[:] = _STATE['label'] == _STATE['label'][sources[0]]
+    else:
+        ball, _ = march_one(_STATE['face'], _STATE['index'],
+                            np.union1d(sources, targets), job['band'])
+        inside[ball] = True
+    patch = AffineHeatPatch(tangent,
+                            np.flatnonzero(inside[tangent.face].all(axis=1)),
+                            tangent.mean_edge ** 2)
     counts = np.diff(ptr)
-    c_of_edge = np.repeat(c_loc, counts)
-    edge_ok = (n_loc >= 0) & (c_of_edge >= 0)
-    edge_ok[edge_ok] = label[n_loc[edge_ok]] == label[c_of_edge[edge_ok]]
-    centre_ok = np.ones(centres.size, dtype=bool)
-    np.logical_and.at(centre_ok, np.repeat(np.arange(centres.size), counts),
-                      edge_ok)
-    centre_ok &= c_loc >= 0
-    r = np.empty(nbr.size)
-    theta = np.empty(nbr.size)
-    phi = np.empty(nbr.size)
-    for comp in np.unique(label[c_loc[centre_ok]]):  # usually one
-        in_comp = np.flatnonzero(centre_ok & (label[np.maximum(c_loc, 0)]
-                                              == comp))
-        keep_v = label == comp
-        comp_face, comp_used = _reindex(sub_face, keep_v)
-        comp_local = np.full(global_of.size, -1, dtype=np.int64)
-        comp_local[comp_used] = np.arange(comp_used.size)
-        V = pos[global_of[comp_used]]
-        try:
-            solver = pp3d.MeshVectorHeatSolver(
-                V, comp_face, t_coef=_same_time(mean_spacing('mesh', V,
-                                                             comp_face)))
-        except RuntimeError:  # geometry-central rejected the patch
-            centre_ok[in_comp] = False
-            continue
-        basis_x, _, basis_n = solver.get_tangent_frames()
-        conv = _mesh_conversion(V, comp_face, global_of[comp_used], frame,
-                                basis_x, basis_n)
-        sel_ptr = np.concatenate([[0], np.cumsum(counts[in_comp])])
-        edges = rows_of(ptr, in_comp)
-        rr, tt, pp = _solve_centres(
-            solver, conv, _STATE['log_kwargs'], comp_local[c_loc[in_comp]],
-            comp_local[n_loc[edges]], sel_ptr, job['hint_phi'][edges])
-        r[edges], theta[edges], phi[edges] = rr, tt, pp
-    return _finish(job, centre_ok, r, theta, phi)
+    rows = np.flatnonzero(patch.local[sources] >= 0)
+    edges = rows_of(ptr, rows)
+    r, psi, beta = (np.full(targets.size, np.nan) for _ in range(3))
+    r[edges], psi[edges], beta[edges] = patch.solve(
+        sources[rows], np.concatenate([[0], np.cumsum(counts[rows])]),
+        targets[edges], threads=_STATE['threads'])
+    return _finish(job, np.ones(sources.size, dtype=bool), r, psi, beta)
 
 
 def _run_cloud_job(job):
@@ -486,30 +419,121 @@ def whole_jobs(label, rows, centres, ptr, nbr, edge_id, hint_phi,
     return jobs
 
 
-def solve_cost(patch_vertices, centres, factorisations=1):
-    """Relative cost of solving ``centres`` on a patch: geometry-central's
-    log map + transport per centre grows like P^1.5 and one factorisation
-    costs about 60 of those at 2.5k vertices, growing like P^(4/3)
-    (measured with potpourri3d on 2.5k-50k vertex meshes)."""
+def solve_cost(kind, patch_vertices, centres, factorisations=1):
+    """Relative cost of solving ``centres`` on a patch, in solves per source
+    on a 2.5k-vertex patch. Meshes (our solves): a source costs about
+    P^1.2 (the fill of the factors) and a factorisation about 40 sources
+    (measured on 2.5k-50k vertex meshes). Point clouds (potpourri3d, log
+    map and transport per centre): P^1.5, and a factorisation about 60 of
+    those, growing like P^(4/3)."""
     p = np.asarray(patch_vertices, dtype=np.float64) / 2500.0
-    return float(np.sum(np.asarray(centres) * p ** 1.5
-                        + 60.0 * np.asarray(factorisations)
-                        * p ** (4.0 / 3.0)))
+    centres = np.asarray(centres)
+    factorisations = np.asarray(factorisations)
+    if kind == 'mesh':
+        return float(np.sum((centres + 40.0 * factorisations) * p ** 1.2))
+    return float(np.sum(centres * p ** 1.5
+                        + 60.0 * factorisations * p ** (4.0 / 3.0)))
+
+
+def solve_all(kind, pos, face, frame, label, centres, ptr, nbr, pair_id,
+              reach, hint_phi, spacing, area, margin, workers):
+    """Plans the jobs for ``centres`` (sources) and their neighbours
+    (targets) ``nbr[ptr[k]:ptr[k + 1]]``, patches or whole components as the
+    cost model says, runs them, and redoes failed centres on their whole
+    component. Returns the job results."""
+    band = margin * spacing
+    jobs = plan_jobs(kind, pos, face, label, centres, ptr, nbr, pair_id,
+                     reach, band, hint_phi)
+    density = pos.shape[0] / max(area, 1e-300)
+    patch = np.array([min(pos.shape[0], density * math.pi * job['size'] ** 2)
+                      for job in jobs])
+    sizes = np.array([job['centres'].size for job in jobs])
+    work = float((sizes * patch).sum())
+    # Where the discs cover much of the surface, patches are nearly the
+    # whole surface and only add factorisations: then solve on the whole
+    # components (split across the workers), as the original does.
+    comps, per_comp = np.unique(label[centres], return_counts=True)
+    comp_vertices = np.bincount(label)[comps]
+    whole_work = float((per_comp * comp_vertices).sum())
+    # Each worker process factorises its component; split only if they
+    # will start (meshes solve in threads, with one factorisation).
+    chunks = workers if kind == 'cloud' and whole_work > POOL_WORK else 1
+    whole = solve_cost(kind, comp_vertices, per_comp,
+                       np.minimum(chunks, per_comp))
+    if PLAN == 'whole' or (PLAN == 'auto'
+                           and whole <= solve_cost(kind, patch, sizes)):
+        work = whole_work
+        jobs = whole_jobs(label, np.arange(centres.size), centres, ptr, nbr,
+                          pair_id, hint_phi, chunks=chunks)
+    results = run_jobs(jobs, kind, pos, face, frame, spacing, workers, work)
+    failed = np.concatenate([res[-1] for res in results])
+    if failed.size:
+        rows = np.searchsorted(centres, failed)
+        more = run_jobs(whole_jobs(label, rows, centres, ptr, nbr, pair_id,
+                                   hint_phi), kind, pos, face, frame, spacing, workers, work)
+        still = np.concatenate([res[-1] for res in more])
+        if still.size:
+            raise ValueError(f"the vector heat solve failed for "
+                             f"{still.size} centre(s) (first: "
+                             f"{still[:5].tolist()}) even on their whole "
+                             f"connected component; check the mesh for "
+                             f"slivers or use method='fast'")
+        results += more
+    return results
+
+
+def mesh_log_map(pos, face, frame, label, j, i, estimate, spacing, area,
+                 margin, workers):
+    """r, theta, phi of the edges ``j -> i`` of a mesh (numpy arrays), from
+    the original's solves per centre on patches."""
+    tangent = MeshTangentData(pos, face, frame)
+    order = np.argsort(i, kind='stable')
+    centres, start = np.unique(i[order], return_index=True)
+    ptr = np.append(start, i.size).astype(np.int64)
+    results = solve_all('mesh', pos, face, frame, label, centres, ptr,
+                        j[order], order,
+                        np.maximum.reduceat(estimate[order], start),
+                        np.zeros(i.size), spacing, area, margin, workers)
+    r, psi, beta = (np.empty(i.size) for _ in range(3))
+    for edge, rr, pp, bb, _ in results:  # a loop over patches
+        r[edge], psi[edge], beta[edge] = rr, pp, bb
+    sign, offset = tangent.sign, tangent.offset
+    theta = _wrap(offset[i] + sign[i] * psi)
+    # e_u(j) is at angle -sign_j offset_j in j's space, and the transport
+    # from i to j turns i's reference direction (angle 0) by beta.
+    phi = _wrap(offset[i] - sign[i] * (sign[j] * offset[j] + beta))
+    loop = i == j
+    r[loop], theta[loop], phi[loop] = 0.0, 0.0, 0.0
+    return r, theta, phi
 
 
 def run_jobs(jobs, kind, pos, face, frame, spacing, workers, work_estimate):
-    """Runs the jobs in this process or in ``workers`` spawned processes."""
+    """Runs the jobs in this process (meshes: the solves in ``workers``
+    threads) or, for point clouds, in ``workers`` spawned processes."""
     results = []
-    if workers > 1 and len(jobs) > 1 and work_estimate > POOL_WORK:
+    if (kind == 'cloud' and workers > 1 and len(jobs) > 1
+            and work_estimate > POOL_WORK):
         # 'spawn': the parent may hold torch/numba thread pools, which a
-        # forked child must not inherit.
-        with ProcessPoolExecutor(
-                max_workers=min(workers, len(jobs)),
-                mp_context=get_context('spawn'), initializer=init_state,
-                initargs=(kind, pos, face, frame, spacing)) as pool:
-            results = list(pool.map(run_job, jobs, chunksize=1))
+        # forked child must not inherit. One thread per worker: BLAS
+        # threads (SuperLU's) spinning beside the other workers slowed a
+        # 10k-vertex run twentyfold.
+        saved = {name: os.environ.get(name) for name in _THREAD_VARIABLES}
+        os.environ.update({name: '1' for name in _THREAD_VARIABLES})
+        try:
+            with ProcessPoolExecutor(
+                    max_workers=min(workers, len(jobs)),
+                    mp_context=get_context('spawn'), initializer=init_state,
+                    initargs=(kind, pos, face, frame, spacing)) as pool:
+                results = list(pool.map(run_job, jobs, chunksize=1))
+        finally:
+            for name, value in saved.items():
+                if value is None:
+                    os.environ.pop(name, None)
+                else:
+                    os.environ[name] = value
     else:
         init_state(kind, pos, face, frame, spacing)
+        _STATE['threads'] = workers
         try:
             results = [run_job(job) for job in jobs]
         finally:

@@ -22,7 +22,6 @@ Self-loops :math:`(i \to i)` get :math:`r = \theta = \phi = 0`. All angles
 are wrapped to :math:`(-\pi, \pi]`.
 """
 import importlib.util
-import math
 from typing import Optional, Tuple
 
 import numpy as np
@@ -406,46 +405,44 @@ def log_map(pos: Tensor, edge_index: Tensor, frame: Optional[Tensor] = None,
     curvature across it (median 0.06 rad from the vector heat result on a
     unit-area scan at :math:`\varepsilon = 0.2`, see the benchmark).
 
-    ``method='vector_heat'`` (CPU, via potpourri3d): the log map
-    (``'AffineLocal'`` strategy where potpourri3d has it) and the transport
-    of the Vector Heat Method (Sharp, Soliman and Crane, 2019), one solve
-    each per centre, converted from geometry-central's vertex tangent spaces
-    to :obj:`frame` (a rotation and, where their normal points the other
-    way, a reflection; at boundary vertices also undoing the rescaling of
-    the fan of triangles to a half plane). :math:`\phi_{ji}` is minus the
-    angle by which the transport of a vector from :math:`i` to :math:`j`
-    turns it, since transport back along the same geodesic is the inverse.
+    ``method='vector_heat'`` (CPU): the ``'AffineLocal'`` log map and the
+    vector transport of the Vector Heat Method (Sharp, Soliman and Crane,
+    2019), the quantities the original HSN code gets from geometry-central
+    with one global solve each per vertex. On meshes they are computed by
+    our own solver (:mod:`tg_intrinsic.geometry._affine_heat`): on the
+    intrinsic Delaunay triangulation (as potpourri3d does by default; the
+    obtuse triangles of real meshes otherwise make heat flows change sign
+    and directions flip), with the affine heat system split into its
+    scalar and connection parts, one factorisation of each serving every
+    centre, and the centres solved in blocks of right-hand sides with
+    compiled triangular solves in ``workers`` threads. It matches
+    potpourri3d's global solves to about :math:`10^{-8}` up to the choice
+    of the direction each vertex calls 0 (tested). :math:`\phi_{ji}` is
+    minus the angle by which the transport of a vector from :math:`i` to
+    :math:`j` turns it, since transport back along the same geodesic is the
+    inverse. Mesh boundary vertices keep their true fan of triangles
+    (geometry-central stretches it to a half plane, which makes corners
+    cone points), so directions at corners are exact on flat meshes.
 
-    The original HSN precomputation solves both problems per vertex on the
-    whole surface. Here centres are grouped around seeds (farthest point
-    sampling) and every group is solved on a local patch: the vertices
-    within ``margin`` mean edge lengths (fast-marching distance) of one of
-    its discs, with one factorisation per patch and patches in parallel
-    processes. The heat flows behind both quantities run for the time
-    :math:`t = h^2` (:math:`h` the mean edge length), and the influence of
-    the patch rim decays like :math:`e^{-2 b / h}` with its distance
-    :math:`b`: with the default of 8 edge lengths the patch result matches
-    the global one to about :math:`10^{-3}` rad (99th percentile) on scanned
-    meshes and to :math:`10^{-7}` on flat ones. Patches keep the diffusion
-    time of the whole surface. When the discs are so large that patches
-    would be nearly the whole surface (a cost model of the solves decides,
-    e.g. :math:`\varepsilon = 0.2` on a 2.5k-vertex unit-area mesh), the
-    centres are solved on their whole component instead, as the original
-    does, split over the workers. A patch that falls apart keeps the component
-    of each centre; a centre whose neighbours are not all in its patch
-    component (or whose solve fails) is redone on its whole connected
-    component, as in the original. Meshes must be oriented manifolds
-    (geometry-central's requirement); rim vertices where a cut patch pinches
-    are split. At mesh boundary vertices whose fan of triangles is not a
-    straight half plane (e.g. corners), geometry-central's connection makes
-    a cone point: directions and transport from or to such a vertex are
-    distorted (up to 1.4 rad at the 90 degree corner of a flat square), as
-    in the original; straight rims are exact. On point clouds the patch is a
-    Euclidean ball and the solver potpourri3d's point-cloud heat solver,
-    which is markedly less accurate than the mesh one (on a 3k-point unit
-    sphere with :math:`\varepsilon = 0.4`: log-map angles 0.03 rad median,
-    0.26 rad worst; radii up to 5 % of :math:`\varepsilon`; transport 1e-3
-    rad median, 0.16 rad worst).
+    The heat flows run for the time :math:`t = h^2` (:math:`h` the mean
+    edge length of the intrinsic triangulation) and the influence of far
+    parts of the surface decays like :math:`e^{-2 b / h}` with their
+    distance :math:`b`. Where the discs are small against the surface,
+    centres are grouped around seeds (farthest point sampling) and every
+    group is solved on a patch: the triangles within ``margin`` mean edge
+    lengths (fast-marching distance) of one of its discs, which matches the
+    whole-surface result to about :math:`10^{-4}`; a cost model picks
+    patches or whole components. A centre whose neighbours are not all
+    connected to it inside its patch is redone on its whole connected
+    component, as in the original. Meshes must be oriented manifolds.
+
+    On point clouds the solver is potpourri3d's point-cloud heat solver
+    (install ``potpourri3d``) on Euclidean balls around the groups, in
+    ``workers`` processes, converted from its tangent bases to
+    :obj:`frame`; it is markedly less accurate than the mesh one (on a
+    3k-point unit sphere with :math:`\varepsilon = 0.4`: log-map angles
+    0.03 rad median, 0.26 rad worst; radii up to 5 % of
+    :math:`\varepsilon`; transport 1e-3 rad median, 0.16 rad worst).
 
     Args:
         pos (torch.Tensor): Points (mesh vertices).
@@ -463,9 +460,9 @@ def log_map(pos: Tensor, edge_index: Tensor, frame: Optional[Tensor] = None,
         margin (float, optional): ``'vector_heat'`` patch margin around the
             discs, in mean edge lengths (mean point spacings for clouds).
             (default: :obj:`8.0`)
-        workers (int, optional): ``'vector_heat'`` worker processes; large
-            jobs only (small ones run in this process, where starting
-            workers would cost more). (default: :obj:`None`, one per CPU)
+        workers (int, optional): ``'vector_heat'`` threads (meshes) or
+            worker processes (point clouds; large jobs only, where starting
+            them pays). (default: :obj:`None`, one per CPU)
 
     Shapes:
         - **input:** pos :math:`(N, 3)`, edge_index :math:`(2, E)`,
@@ -484,9 +481,10 @@ def log_map(pos: Tensor, edge_index: Tensor, frame: Optional[Tensor] = None,
     if method == 'fast':
         return _fast(pos, frame, edge_index)
     margin = check_positive_float(margin, 'margin', allow_zero=True)
-    if importlib.util.find_spec('potpourri3d') is None:
-        raise ImportError("method='vector_heat' needs potpourri3d: pip "
-                          "install potpourri3d (or tg_intrinsic[heat])")
+    if face is None and importlib.util.find_spec('potpourri3d') is None:
+        raise ImportError("method='vector_heat' on point clouds needs "
+                          "potpourri3d: pip install potpourri3d (or "
+                          "tg_intrinsic[heat])")
     workers = (_vector_heat.default_workers() if workers is None
                else check_positive_int(workers, 'workers'))
     r, theta, phi = _vector_heat_log_map(pos, edge_index, frame, face,
@@ -516,59 +514,24 @@ def _vector_heat_log_map(pos, edge_index, frame, face, margin, workers):
                          f"{j[e]} -> {i[e]}), so no geodesic exists; build "
                          f"the graph with geodesic_neighbourhoods(), which "
                          f"never does that")
-    order = np.argsort(i, kind='stable')
-    centres, start, counts = np.unique(i[order], return_index=True,
-                                       return_counts=True)
-    ptr = np.append(start, num).astype(np.int64)
-    nbr = j[order]
     # The 'fast' answer sizes the patches (reach of every disc) and picks
-    # the branch of transported angles at boundary vertices.
-    est = [t.cpu().numpy()[order] for t in _fast(
+    # the branch of transported angles at point-cloud boundary vertices.
+    est = [t.cpu().numpy() for t in _fast(
         pos.detach().double(), frame.detach().double(), edge_index)]
-    reach = np.maximum.reduceat(est[0], start)
     spacing = vh.mean_spacing(kind, p, f)
     if kind == 'mesh':
         area = float(face_areas(pos.detach().double().cpu(),
                                 face.cpu()).sum())
-    else:
-        area = p.shape[0] * spacing ** 2
-    jobs = vh.plan_jobs(kind, p, f, label, centres, ptr, nbr, order, reach,
-                        margin * spacing, est[2])
-    density = p.shape[0] / max(area, 1e-300)
-    patch = np.array([min(p.shape[0], density * math.pi * job['size'] ** 2)
-                      for job in jobs])
-    sizes = np.array([job['centres'].size for job in jobs])
-    work = float((sizes * patch).sum())
-    # Where the discs cover much of the surface, patches are nearly the
-    # whole surface and only add factorisations: then solve on the whole
-    # components (split across the workers), as the original does.
-    comps, per_comp = np.unique(label[centres], return_counts=True)
-    comp_vertices = np.bincount(label)[comps]
-    whole_work = float((per_comp * comp_vertices).sum())
-    # Each worker factorises its component; split only if they will start.
-    chunks = workers if whole_work > vh.POOL_WORK else 1
-    whole = vh.solve_cost(comp_vertices, per_comp,
-                          np.minimum(chunks, per_comp))
-    if vh.PLAN == 'whole' or (vh.PLAN == 'auto'
-                              and whole <= vh.solve_cost(patch, sizes)):
-        work = whole_work
-        jobs = vh.whole_jobs(label, np.arange(centres.size), centres, ptr,
-                             nbr, order, est[2], chunks=chunks)
-    results = vh.run_jobs(jobs, kind, p, f, fr, spacing, workers, work)
-    failed = np.concatenate([res[4] for res in results])
-    if failed.size:
-        rows = np.searchsorted(centres, failed)
-        more = vh.run_jobs(vh.whole_jobs(label, rows, centres, ptr, nbr,
-                                         order, est[2]),
-                           kind, p, f, fr, spacing, workers, work)
-        still = np.concatenate([res[4] for res in more])
-        if still.size:
-            raise ValueError(f"the vector heat solve failed for "
-                             f"{still.size} centre(s) (first: "
-                             f"{still[:5].tolist()}) even on their whole "
-                             f"connected component; check the mesh for "
-                             f"slivers or use method='fast'")
-        results += more
+        out = vh.mesh_log_map(p, f, fr, label, j, i, est[0], spacing, area,
+                              margin, workers)
+        return tuple(torch.from_numpy(o) for o in out)
+    area = p.shape[0] * spacing ** 2
+    order = np.argsort(i, kind='stable')
+    centres, start = np.unique(i[order], return_index=True)
+    ptr = np.append(start, num).astype(np.int64)
+    results = vh.solve_all(kind, p, f, fr, label, centres, ptr, j[order],
+                           order, np.maximum.reduceat(est[0][order], start),
+                           est[2][order], spacing, area, margin, workers)
     r = np.empty(num)
     theta = np.empty(num)
     phi = np.empty(num)

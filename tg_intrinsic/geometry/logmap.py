@@ -415,9 +415,11 @@ def log_map(pos: Tensor, edge_index: Tensor, frame: Optional[Tensor] = None,
     and directions flip), with the affine heat system split into its
     scalar and connection parts, one factorisation of each serving every
     centre, and the centres solved in blocks of right-hand sides with
-    compiled triangular solves in ``workers`` threads. It matches
-    potpourri3d's global solves to about :math:`10^{-8}` up to the choice
-    of the direction each vertex calls 0 (tested). :math:`\phi_{ji}` is
+    compiled triangular solves in ``workers`` threads. Its radii match
+    potpourri3d's global solves to round-off; its angles differ by the
+    direction each vertex's tangent space calls 0 (we align it with all the
+    vertex's edges, geometry-central with one), and both are as close to
+    the analytic answer on a jittered sphere (tested). :math:`\phi_{ji}` is
     minus the angle by which the transport of a vector from :math:`i` to
     :math:`j` turns it, since transport back along the same geodesic is the
     inverse. Mesh boundary vertices keep their true fan of triangles
@@ -430,9 +432,9 @@ def log_map(pos: Tensor, edge_index: Tensor, frame: Optional[Tensor] = None,
     distance :math:`b`. Where the discs are small against the surface,
     centres are grouped around seeds (farthest point sampling) and every
     group is solved on a patch: the triangles within ``margin`` mean edge
-    lengths (fast-marching distance) of one of its discs, which matches the
-    whole-surface result to about :math:`10^{-4}`; a cost model picks
-    patches or whole components. A centre whose neighbours are not all
+    lengths (fast-marching distance) of one of its discs (the benchmark
+    measures what that changes); a cost model picks patches or whole
+    components. A centre whose neighbours are not all
     connected to it inside its patch is redone on its whole connected
     component, as in the original. Meshes must be oriented manifolds.
 

@@ -54,8 +54,10 @@ class LogMap(BaseTransform):
             meshes in the paper).
         method (str, optional): :obj:`'fast'` (vectorised torch: tangent
             projection rescaled to arc length, any device) or
-            :obj:`'vector_heat'` (the Vector Heat Method of potpourri3d on
-            local patches, in parallel processes). (default: :obj:`'fast'`)
+            :obj:`'vector_heat'` (the Vector Heat Method's log map and
+            transport, as the original computes them with geometry-central,
+            solved for all centres at once; point clouds need potpourri3d).
+            (default: :obj:`'fast'`)
         max_neighbors (int, optional): Keep the nearest this many points of
             every disc. (default: :obj:`None`)
         transport (bool, optional): Also write ``transport``.

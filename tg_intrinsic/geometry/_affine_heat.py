@@ -48,7 +48,7 @@ CENTRE_CHUNK = 256
 def _signposts(corner_ptr, corner_list, corner_next, corner_angle, signpost,
                total, is_open):  # pragma: no cover (numba)
     """The angle of every halfedge at its tail, counter-clockwise from the
-    vertex's first halfedge (the reference), walking the fans of triangles around each
+    vertex's first halfedge, walking the fans of triangles around each
     vertex (open fans from their boundary edge; closed ones from their
     first triangle). Halfedge ``h = 3 f + s`` is also corner ``h``."""
     has_prev = np.zeros(corner_next.shape[0], dtype=np.bool_)

@@ -70,7 +70,7 @@ def mean_spacing(kind: str, pos: np.ndarray, face) -> float:
 
 
 def init_state(kind: str, pos: np.ndarray, face, frame: np.ndarray,
-               spacing: float):
+               spacing: float, tangent=None):
     """Stores the surface in this process (the worker initializer).
     ``spacing`` is :func:`mean_spacing` of the whole surface."""
     _STATE.clear()
@@ -78,7 +78,8 @@ def init_state(kind: str, pos: np.ndarray, face, frame: np.ndarray,
     if kind == 'mesh':
         _STATE['index'] = surface_index(pos, face)
         _STATE['label'] = _components(face, pos.shape[0])
-        _STATE['tangent'] = MeshTangentData(pos, face, frame)
+        _STATE['tangent'] = (MeshTangentData(pos, face, frame)
+                             if tangent is None else tangent)
     else:
         _STATE['tree'] = cKDTree(pos)
 
@@ -436,7 +437,8 @@ def solve_cost(kind, patch_vertices, centres, factorisations=1):
 
 
 def solve_all(kind, pos, face, frame, label, centres, ptr, nbr, pair_id,
-              reach, hint_phi, spacing, area, margin, workers):
+              reach, hint_phi, spacing, area, margin, workers,
+              tangent=None):
     """Plans the jobs for ``centres`` (sources) and their neighbours
     (targets) ``nbr[ptr[k]:ptr[k + 1]]``, patches or whole components as the
     cost model says, runs them, and redoes failed centres on their whole
@@ -465,12 +467,14 @@ def solve_all(kind, pos, face, frame, label, centres, ptr, nbr, pair_id,
         work = whole_work
         jobs = whole_jobs(label, np.arange(centres.size), centres, ptr, nbr,
                           pair_id, hint_phi, chunks=chunks)
-    results = run_jobs(jobs, kind, pos, face, frame, spacing, workers, work)
+    results = run_jobs(jobs, kind, pos, face, frame, spacing, workers, work,
+                       tangent)
     failed = np.concatenate([res[-1] for res in results])
     if failed.size:
         rows = np.searchsorted(centres, failed)
         more = run_jobs(whole_jobs(label, rows, centres, ptr, nbr, pair_id,
-                                   hint_phi), kind, pos, face, frame, spacing, workers, work)
+                                   hint_phi), kind, pos, face, frame,
+                        spacing, workers, work, tangent)
         still = np.concatenate([res[-1] for res in more])
         if still.size:
             raise ValueError(f"the vector heat solve failed for "
@@ -485,7 +489,7 @@ def solve_all(kind, pos, face, frame, label, centres, ptr, nbr, pair_id,
 def mesh_log_map(pos, face, frame, label, j, i, estimate, spacing, area,
                  margin, workers):
     """r, theta, phi of the edges ``j -> i`` of a mesh (numpy arrays), from
-    the original's solves per centre on patches."""
+    the original's solves per centre, on patches or whole components."""
     tangent = MeshTangentData(pos, face, frame)
     order = np.argsort(i, kind='stable')
     centres, start = np.unique(i[order], return_index=True)
@@ -493,7 +497,8 @@ def mesh_log_map(pos, face, frame, label, j, i, estimate, spacing, area,
     results = solve_all('mesh', pos, face, frame, label, centres, ptr,
                         j[order], order,
                         np.maximum.reduceat(estimate[order], start),
-                        np.zeros(i.size), spacing, area, margin, workers)
+                        np.zeros(i.size), spacing, area, margin, workers,
+                        tangent)
     r, psi, beta = (np.empty(i.size) for _ in range(3))
     for edge, rr, pp, bb, _ in results:  # a loop over patches
         r[edge], psi[edge], beta[edge] = rr, pp, bb
@@ -507,7 +512,8 @@ def mesh_log_map(pos, face, frame, label, j, i, estimate, spacing, area,
     return r, theta, phi
 
 
-def run_jobs(jobs, kind, pos, face, frame, spacing, workers, work_estimate):
+def run_jobs(jobs, kind, pos, face, frame, spacing, workers, work_estimate,
+             tangent=None):
     """Runs the jobs in this process (meshes: the solves in ``workers``
     threads) or, for point clouds, in ``workers`` spawned processes."""
     results = []
@@ -532,7 +538,7 @@ def run_jobs(jobs, kind, pos, face, frame, spacing, workers, work_estimate):
                 else:
                     os.environ[name] = value
     else:
-        init_state(kind, pos, face, frame, spacing)
+        init_state(kind, pos, face, frame, spacing, tangent)
         _STATE['threads'] = workers
         try:
             results = [run_job(job) for job in jobs]

@@ -9,7 +9,8 @@ from .log_map import LogMap
 from .parallel_transport import ParallelTransport
 from .multiscale_supports import MultiscaleSupports
 from .harmonic_precompute import HarmonicPrecompute
+from .gravo_hierarchy import GravoHierarchy
 
 __all__ = ['EstimateNormals', 'TangentFrames', 'MLSOperators',
            'RandomRotation', 'NormalizeArea', 'LogMap', 'ParallelTransport',
-           'MultiscaleSupports', 'HarmonicPrecompute']
+           'MultiscaleSupports', 'HarmonicPrecompute', 'GravoHierarchy']

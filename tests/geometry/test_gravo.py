@@ -1,0 +1,167 @@
+"""Gravo MG hierarchies: the sampling sweep, coarse triangles and the
+closest-point projection against brute force, the prolongation's
+properties on meshes, boundaries, point clouds and several components,
+and exact interpolation of linear functions on a plane."""
+import itertools
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import trimesh
+from scipy.sparse.csgraph import dijkstra
+
+from tg_intrinsic.geometry.gravo import (_closest_on_triangle, _csr,
+                                         _triangles, gravo_hierarchy,
+                                         gravo_level)
+
+from ..conftest import grid_mesh
+
+
+def face_edges(face):
+    return np.concatenate([face[:, [0, 1]], face[:, [1, 2]],
+                           face[:, [2, 0]]]).T
+
+
+def sphere(subdivisions=4):
+    mesh = trimesh.creation.icosphere(subdivisions=subdivisions)
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces, dtype=np.int64)
+
+
+def knn_edges(points, k=8):
+    from scipy.spatial import cKDTree
+    _, nbr = cKDTree(points).query(points, k=k + 1)
+    return np.stack([nbr[:, 1:].reshape(-1),
+                     np.repeat(np.arange(points.shape[0]), k)])
+
+
+def check_prolongation(level, num_fine):
+    rows, cols = level.prolong_index
+    assert np.bincount(rows, minlength=num_fine).max() <= 3
+    assert (level.prolong_weight > 0).all()
+    assert np.abs(np.bincount(rows, level.prolong_weight, num_fine)
+                  - 1).max() < 1e-12
+    assert np.unique(cols).size == level.sample.size  # every coarse point
+    assert np.array_equal(np.unique(rows), np.arange(num_fine))
+
+
+@pytest.mark.parametrize('case', ['sphere', 'boundary', 'cloud',
+                                  'components'])
+def test_prolongation_rows_are_partitions_of_unity(case):
+    if case == 'sphere':
+        pos, face = sphere(5)
+        edges = face_edges(face)
+    elif case == 'boundary':
+        p, f = grid_mesh(60, jitter=0.3)
+        pos, edges = p.numpy(), face_edges(f.t().numpy())
+    elif case == 'cloud':
+        rng = np.random.default_rng(0)
+        pos = rng.normal(size=(6000, 3))
+        pos /= np.linalg.norm(pos, axis=1, keepdims=True)
+        edges = knn_edges(pos)
+    else:
+        pos, face = sphere(4)
+        pos = np.concatenate([pos, pos + 3.0])
+        edges = face_edges(np.concatenate([face, face + pos.shape[0] // 2]))
+    levels = gravo_hierarchy(pos, edges, lower_bound=100)
+    assert len(levels) >= 1
+    num = pos.shape[0]
+    for level in levels:
+        check_prolongation(level, num)
+        # Each level shrinks by roughly the ratio (8).
+        assert 4 < num / level.sample.size < 14
+        num = level.sample.size
+    if case == 'components':
+        # Cells and coarse edges never cross between the two spheres.
+        half = pos.shape[0] // 2
+        first = levels[0]
+        side = first.sample >= half
+        assert np.array_equal(side[first.cluster], np.arange(pos.shape[0])
+                              >= half)
+        a, b = first.edge_index
+        assert np.array_equal(side[a], side[b])
+
+
+def test_sampling_sweep_keeps_samples_apart():
+    pos, face = sphere(4)
+    edges = face_edges(face)
+    level = gravo_level(pos, edges, ratio=8.0)
+    n = pos.shape[0]
+    indptr, indices = _csr(edges, n)
+    graph = sp.csr_matrix((np.ones(indices.size), indices, indptr),
+                          shape=(n, n))
+    hops = dijkstra(graph, indices=level.sample, unweighted=True,
+                    limit=2.5)[:, level.sample]
+    mean = np.linalg.norm(pos[edges[0]] - pos[edges[1]], axis=1).mean()
+    dist = np.linalg.norm(pos[level.sample][:, None]
+                          - pos[level.sample][None], axis=2)
+    close = (hops <= 2) & (dist < 2.0 * mean)
+    np.fill_diagonal(close, False)
+    assert not close.any()
+    # ... and every point is near one: none was left eligible.
+    reach = dijkstra(graph, indices=level.sample, unweighted=True,
+                     limit=2.5, min_only=True)
+    assert np.isfinite(reach).all()
+
+
+def test_coarse_triangles_are_all_three_cliques():
+    rng = np.random.default_rng(1)
+    n = 30
+    a, b = np.triu_indices(n, 1)
+    pick = rng.random(a.size) < 0.2
+    indptr, indices = _csr(np.stack([a[pick], b[pick]]), n)
+    found = {tuple(t) for t in _triangles(indptr, indices)}
+    adj = np.zeros((n, n), dtype=bool)
+    adj[a[pick], b[pick]] = adj[b[pick], a[pick]] = True
+    brute = {t for t in itertools.combinations(range(n), 3)
+             if adj[t[0], t[1]] and adj[t[1], t[2]] and adj[t[0], t[2]]}
+    assert found == brute and len(brute) > 0
+
+
+def test_closest_point_on_triangle_against_brute_force():
+    rng = np.random.default_rng(2)
+    s = np.linspace(0, 1, 301)
+    u, v = np.meshgrid(s, s, indexing='ij')
+    inside = u + v <= 1
+    u, v = u[inside], v[inside]
+    for _ in range(30):
+        a, b, c, p = rng.normal(size=(4, 3))
+        p = p * 2
+        w = _closest_on_triangle(p, a, b, c)
+        q = w[0] * a + w[1] * b + w[2] * c
+        grid = (1 - u - v)[:, None] * a + u[:, None] * b + v[:, None] * c
+        best = np.linalg.norm(grid - p, axis=1).min()
+        assert min(w) >= 0 and abs(sum(w) - 1) < 1e-12
+        assert np.linalg.norm(q - p) <= best + 1e-9
+
+
+def test_linear_functions_are_interpolated_exactly_on_a_plane():
+    # Barycentric weights reproduce linear functions wherever the point
+    # projects into a coarse triangle, which on a plane is nearly
+    # everywhere away from the rim.
+    p, f = grid_mesh(70, jitter=0.3, seed=1)
+    pos, edges = p.numpy(), face_edges(f.t().numpy())
+    level = gravo_level(pos, edges, ratio=8.0, shift=False)
+    linear = lambda x: 0.3 + 2.0 * x[:, 0] - 1.5 * x[:, 1]  # noqa: E731
+    rows, cols = level.prolong_index
+    P = sp.csr_matrix((level.prolong_weight, (rows, cols)),
+                      shape=(pos.shape[0], level.sample.size))
+    err = np.abs(P @ linear(level.pos) - linear(pos))
+    interior = ((pos[:, :2] > 0.1) & (pos[:, :2] < 0.9)).all(1)
+    assert np.mean(err[interior] < 1e-12) > 0.95
+    # Inverse distance weights are smooth but not exact.
+    idw = gravo_level(pos, edges, ratio=8.0, shift=False,
+                      weighting='inverse_distance')
+    rows, cols = idw.prolong_index
+    P = sp.csr_matrix((idw.prolong_weight, (rows, cols)),
+                      shape=(pos.shape[0], idw.sample.size))
+    assert np.mean(np.abs(P @ linear(idw.pos) - linear(pos))[interior]
+                   < 1e-12) < 0.5
+
+
+def test_bad_arguments():
+    pos, face = sphere(2)
+    with pytest.raises(ValueError, match='weighting'):
+        gravo_level(pos, face_edges(face), weighting='linear')
+    with pytest.raises(ValueError, match='above 1'):
+        gravo_hierarchy(pos, face_edges(face), ratio=1.0)
+    assert gravo_hierarchy(pos, face_edges(face), lower_bound=1000) == []

@@ -9,6 +9,7 @@ install_requires = [
     'scipy>=1.10',
     'trimesh>=4.0',
     'numba>=0.59',
+    'pyamg>=5.0',
     'tqdm>=4.60',
     'matplotlib>=3.7',
 ]

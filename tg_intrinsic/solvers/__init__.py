@@ -1,1 +1,4 @@
-"""tg_intrinsic.solvers (filled in by later issues)."""
+"""Solvers for linear systems on surfaces."""
+from .gravo_mg import GravoMG, SolveInfo
+
+__all__ = ['GravoMG', 'SolveInfo']

@@ -1,0 +1,169 @@
+"""GravoMG against scipy's direct solve on closed meshes, meshes with
+boundary, point clouds (robust Laplacian), several components; the cached
+second solve; cycles; conjugate gradients; bad input."""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import torch
+import trimesh
+from scipy.sparse.linalg import cg, spsolve
+from torch_geometric.data import Data
+
+from tg_intrinsic.geometry import cotan_laplacian, lumped_mass, to_scipy
+from tg_intrinsic.solvers import GravoMG
+from tg_intrinsic.transforms import GravoHierarchy
+
+from ..conftest import grid_mesh
+
+
+def face_edges(face):
+    return np.concatenate([face[:, [0, 1]], face[:, [1, 2]],
+                           face[:, [2, 0]]]).T
+
+
+def mesh_system(pos, face, alpha=1e-2):
+    """(M + alpha S) for a mesh: smoothing with a small diffusion."""
+    p, f = torch.as_tensor(pos), torch.as_tensor(face).t().contiguous()
+    S = to_scipy(cotan_laplacian(p, f))
+    m = lumped_mass(p, f).numpy()
+    return (sp.diags(m) + alpha * S).tocsr(), m
+
+
+def sphere(subdivisions=5):
+    mesh = trimesh.creation.icosphere(subdivisions=subdivisions)
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces, dtype=np.int64)
+
+
+def relative_residual(A, x, b):
+    return np.linalg.norm(b - A @ x) / np.linalg.norm(b)
+
+
+def case(name):
+    rng = np.random.default_rng(0)
+    if name == 'closed':
+        pos, face = sphere(5)
+    elif name == 'boundary':
+        # (A jittered grid has obtuse triangles, whose negative cotan
+        # weights slow every smoother: 56 cycles instead of 10.)
+        p, f = grid_mesh(90, jitter=0.05)
+        pos, face = p.numpy(), f.t().numpy()
+        # cut a hole
+        centre = np.linalg.norm(pos[face].mean(1)[:, :2] - 0.5, axis=1)
+        face = face[centre > 0.15]
+        used = np.unique(face)
+        remap = np.full(pos.shape[0], -1)
+        remap[used] = np.arange(used.size)
+        pos, face = pos[used], remap[face]
+    elif name == 'components':
+        pos, face = sphere(4)
+        face = np.concatenate([face, face + pos.shape[0]])
+        pos = np.concatenate([pos, pos + 3.0])
+    if name == 'cloud':
+        import robust_laplacian
+        pos = rng.normal(size=(8000, 3))
+        pos /= np.linalg.norm(pos, axis=1, keepdims=True)
+        S, M = robust_laplacian.point_cloud_laplacian(pos)
+        from scipy.spatial import cKDTree
+        _, nbr = cKDTree(pos).query(pos, k=9)
+        edges = np.stack([nbr[:, 1:].reshape(-1), np.repeat(
+            np.arange(pos.shape[0]), 8)])
+        A = (M + 1e-2 * S).tocsr()
+        return A, M.diagonal(), GravoMG.from_points(pos, edges,
+                                                    lower_bound=50)
+    A, m = mesh_system(pos, face)
+    return A, m, GravoMG.from_points(pos, face_edges(face), lower_bound=50)
+
+
+@pytest.mark.parametrize('name', ['closed', 'boundary', 'cloud',
+                                  'components'])
+def test_matches_direct_solve(name):
+    A, m, solver = case(name)
+    assert len(solver.prolongations) >= 2
+    b = m * np.random.default_rng(1).normal(size=A.shape[0])
+    x = solver.solve(A, b, tol=1e-8, max_iter=60)
+    assert solver.info.converged, solver.info.residuals[-3:]
+    assert relative_residual(A, x, b) < 1e-8
+    exact = spsolve(A.tocsc(), b)
+    assert np.linalg.norm(x - exact) / np.linalg.norm(exact) < 1e-6
+    # The residual history falls, and each cycle cuts it a lot.
+    res = solver.info.residuals
+    assert all(b < a for a, b in zip(res, res[1:]))
+    assert solver.info.iterations < 40
+
+
+def test_second_solve_is_cached_and_identical():
+    A, m, solver = case('closed')
+    b = m * np.random.default_rng(2).normal(size=A.shape[0])
+    first = solver.solve(A, b)
+    setup = solver.info.setup_time
+    second = solver.solve(A, b)
+    assert setup > 0 and solver.info.setup_time == 0.0
+    assert np.array_equal(first, second)
+    assert relative_residual(A, first, b) < 1e-4
+    # A different matrix gets its own setup.
+    solver.solve(A * 2.0, b)
+    assert solver.info.setup_time > 0
+
+
+@pytest.mark.parametrize('cycle', ['V', 'W', 'F'])
+def test_cycles_converge(cycle):
+    A, m, solver = case('closed')
+    b = m * np.random.default_rng(3).normal(size=A.shape[0])
+    x = solver.solve(A, b, tol=1e-10, cycle=cycle, criterion='mass', mass=m)
+    assert solver.info.converged
+    r = b - A @ x
+    assert np.sqrt(np.sum(r * r / m) / np.sum(b * b / m)) < 1e-10
+
+
+def test_preconditioned_conjugate_gradients():
+    A, m, solver = case('boundary')
+    b = m * np.random.default_rng(4).normal(size=A.shape[0])
+    counts = {}
+    for name, M in (('plain', None), ('gravo', solver.as_preconditioner(A))):
+        calls = []
+        x, flag = cg(A, b, rtol=1e-10, maxiter=2000, M=M,
+                     callback=lambda xk: calls.append(1))
+        assert flag == 0 and relative_residual(A, x, b) < 1e-9
+        counts[name] = len(calls)
+    assert counts['gravo'] * 5 < counts['plain']
+
+
+def test_from_transform_and_direct_fallback():
+    pos, face = sphere(4)
+    data = GravoHierarchy(lower_bound=50)(Data(
+        pos=torch.tensor(pos), face=torch.tensor(face).t().contiguous()))
+    solver = GravoMG.from_data(data)
+    A, m = mesh_system(pos, face)
+    b = m.copy()
+    x = solver.solve(A, b, tol=1e-9)
+    assert relative_residual(A, x, b) < 1e-9
+    assert 'levels=[2562' in repr(solver)
+    # Too few points for a level: one direct solve, and info says so.
+    small = GravoMG([])
+    x = small.solve(A, b)
+    assert small.info.direct and 'direct' in small.info.direct
+    assert relative_residual(A, x, b) < 1e-12
+
+
+def test_bad_input():
+    A, m, solver = case('closed')
+    b = m.copy()
+    with pytest.raises(ValueError, match='square'):
+        solver.solve(A[:, :-1], b)
+    with pytest.raises(ValueError, match='symmetric'):
+        solver.solve(A + sp.random(A.shape[0], A.shape[0], density=1e-4,
+                                   random_state=0, format='csr'), b)
+    bad = A.copy()
+    bad.data[0] = np.nan
+    with pytest.raises(ValueError, match='NaN'):
+        solver.solve(bad, b)
+    with pytest.raises(ValueError, match='NaN'):
+        solver.solve(A, np.full_like(b, np.nan))
+    with pytest.raises(ValueError, match='singular'):
+        solver.solve(A - sp.diags(m), b)  # the bare Laplacian
+    with pytest.raises(ValueError, match='hierarchy has'):
+        solver.solve(A[:-1, :-1], b[:-1])
+    with pytest.raises(ValueError, match='cycle'):
+        solver.solve(A, b, cycle='X')
+    with pytest.raises(ValueError, match='mass'):
+        solver.solve(A, b, criterion='mass')

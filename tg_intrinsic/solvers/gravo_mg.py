@@ -1,0 +1,263 @@
+import hashlib
+import time
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import LinearOperator, splu
+
+from tg_intrinsic.geometry.gravo import gravo_hierarchy
+
+CYCLES = ('V', 'W', 'F')
+CRITERIA = ('relative', 'mass')
+
+
+@dataclass
+class SolveInfo:
+    """What a :meth:`GravoMG.solve` did: the iterations (cycles), the
+    residual after each (relative, or mass-weighted), whether it reached
+    the tolerance, the setup time (zero when the matrix was cached) and the
+    solve time in seconds, and ``direct`` with the reason when there was no
+    hierarchy to cycle on."""
+    iterations: int = 0
+    residuals: List[float] = field(default_factory=list)
+    converged: bool = False
+    setup_time: float = 0.0
+    solve_time: float = 0.0
+    direct: Optional[str] = None
+
+
+class _Levels:
+    """Galerkin operators of one matrix and the coarsest factorisation."""
+
+    def __init__(self, A: sp.csr_matrix, prolongations):
+        self.A = [A]
+        for P in prolongations:
+            self.A.append((P.T @ self.A[-1] @ P).tocsr())
+        self.coarse = splu(self.A[-1].tocsc())
+
+
+def _key(A: sp.csr_matrix) -> str:
+    digest = hashlib.blake2b(digest_size=16)
+    for array in (A.indptr, A.indices, A.data):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    return f'{A.shape}:{digest.hexdigest()}'
+
+
+class GravoMG:
+    r"""Geometric multigrid solver for sparse symmetric positive definite
+    systems :math:`A x = b` on surfaces (Gravo MG; Wiersma et al., SIGGRAPH
+    2023), on a graph-Voronoi hierarchy with prolongations
+    :math:`P_0, \dots, P_{L-1}`. The coarse operators are Galerkin
+    products,
+
+    .. math::
+        A_{l+1} = P_l^\top A_l P_l,
+
+    and one cycle smooths with Gauss-Seidel (pyamg's compiled kernel;
+    forward before, backward after the coarse correction, so a V-cycle is
+    a symmetric operator), restricts the residual with :math:`P_l^\top`,
+    corrects recursively, and solves the coarsest level directly. The
+    Galerkin operators and the coarse factorisation are cached per matrix,
+    so later solves with the same :math:`A` cost only cycles.
+
+    Args:
+        prolongations (list of scipy.sparse matrices): :math:`P_l`, fine to
+            coarse, shapes :math:`(n_l, n_{l+1})`. Build them with
+            :meth:`from_data` (a :class:`~tg_intrinsic.transforms.
+            GravoHierarchy` result) or :meth:`from_points`.
+        cache_size (int, optional): Matrices whose setup is kept.
+            (default: :obj:`4`)
+    """
+    def __init__(self, prolongations: Sequence[sp.spmatrix],
+                 cache_size: int = 4):
+        self.prolongations = [sp.csr_matrix(P) for P in prolongations]
+        for fine, coarse in zip(self.prolongations, self.prolongations[1:]):
+            if fine.shape[1] != coarse.shape[0]:
+                raise ValueError(f"prolongations do not chain: "
+                                 f"{fine.shape} then {coarse.shape}")
+        self.cache_size = cache_size
+        self._cache: Dict[str, _Levels] = {}
+        self.info = SolveInfo()
+
+    @classmethod
+    def from_points(cls, pos: np.ndarray, edge_index: np.ndarray,
+                    **hierarchy) -> 'GravoMG':
+        """Builds the hierarchy of points (N, 3) with the neighbour graph
+        ``edge_index`` (2, E); keyword arguments go to
+        :func:`~tg_intrinsic.geometry.gravo.gravo_hierarchy`."""
+        levels = gravo_hierarchy(np.asarray(pos, dtype=np.float64),
+                                 np.asarray(edge_index), **hierarchy)
+        n = np.asarray(pos).shape[0]
+        out = []
+        for level in levels:
+            out.append(sp.csr_matrix(
+                (level.prolong_weight, tuple(level.prolong_index)),
+                shape=(n, level.sample.size)))
+            n = level.sample.size
+        return cls(out)
+
+    @classmethod
+    def from_data(cls, data) -> 'GravoMG':
+        """Reads ``prolong_index_l`` / ``prolong_weight_l`` of a (possibly
+        batched) :class:`~tg_intrinsic.transforms.GravoHierarchy` result."""
+        out = []
+        n = data.pos.size(0)
+        level = 1
+        while f'prolong_index_{level}' in data:
+            m = data[f'pos_{level}'].size(0)
+            rows, cols = data[f'prolong_index_{level}'].cpu().numpy()
+            out.append(sp.csr_matrix(
+                (data[f'prolong_weight_{level}'].cpu().double().numpy(),
+                 (rows, cols)), shape=(n, m)))
+            n, level = m, level + 1
+        return cls(out)
+
+    @property
+    def num_points(self) -> Optional[int]:
+        return self.prolongations[0].shape[0] if self.prolongations else None
+
+    # ------------------------------------------------------------------
+    def _check(self, A) -> sp.csr_matrix:
+        if not sp.issparse(A):
+            raise ValueError(f"'A' must be a scipy sparse matrix, got "
+                             f"{type(A).__name__}")
+        A = sp.csr_matrix(A, dtype=np.float64)
+        if A.shape[0] != A.shape[1]:
+            raise ValueError(f"'A' must be square, got shape {A.shape}")
+        if self.num_points is not None and A.shape[0] != self.num_points:
+            raise ValueError(f"'A' is {A.shape[0]} x {A.shape[1]} but the "
+                             f"hierarchy has {self.num_points} points")
+        if not np.all(np.isfinite(A.data)):
+            raise ValueError("'A' holds NaN or infinite entries")
+        scale = abs(A).max() if A.nnz else 0.0
+        if scale == 0:
+            raise ValueError("'A' is zero")
+        if abs(A - A.T).max() > 1e-10 * scale:
+            raise ValueError("'A' is not symmetric; Gravo MG (Galerkin "
+                             "coarsening, Gauss-Seidel smoothing) needs a "
+                             "symmetric positive definite matrix")
+        ones = np.ones(A.shape[0])
+        if np.abs(A @ ones).max() <= 1e-12 * scale * np.sqrt(A.shape[0]):
+            raise ValueError("'A' annihilates constants, so it is singular "
+                             "(a pure Laplacian?); add a mass term, e.g. "
+                             "S + eta * M, or fix a value")
+        return A
+
+    def setup(self, A) -> _Levels:
+        """The cached Galerkin operators and coarse factorisation of A."""
+        A = self._check(A)
+        key = _key(A)
+        levels = self._cache.get(key)
+        self.info = SolveInfo()
+        if levels is None:
+            start = time.perf_counter()
+            levels = _Levels(A, self.prolongations)
+            self.info.setup_time = time.perf_counter() - start
+            if len(self._cache) >= self.cache_size:
+                self._cache.pop(next(iter(self._cache)))
+            self._cache[key] = levels
+        return levels
+
+    def _cycle(self, levels: _Levels, level: int, b, x, kind: str, pre: int,
+               post: int):
+        from pyamg.relaxation.relaxation import gauss_seidel
+        A = levels.A[level]
+        if level == len(levels.A) - 1:
+            return levels.coarse.solve(b)
+        gauss_seidel(A, x, b, iterations=pre, sweep='forward')
+        P = self.prolongations[level]
+        coarse_b = P.T @ (b - A @ x)
+        coarse_x = np.zeros_like(coarse_b)
+        visits = 2 if kind == 'W' else 1
+        for _ in range(visits):
+            coarse_x = self._cycle(levels, level + 1, coarse_b, coarse_x,
+                                   kind, pre, post)
+        if kind == 'F':
+            coarse_x = self._cycle(levels, level + 1, coarse_b, coarse_x,
+                                   'V', pre, post)
+        x += P @ coarse_x
+        gauss_seidel(A, x, b, iterations=post, sweep='backward')
+        return x
+
+    def solve(self, A, b, x0=None, tol: float = 1e-4, max_iter: int = 100,
+              criterion: str = 'relative', mass=None, pre: int = 2,
+              post: int = 2, cycle: str = 'V') -> np.ndarray:
+        r"""Cycles until the residual :math:`r = b - A x` is small:
+        ``'relative'``: :math:`\|r\| / \|b\|`, ``'mass'``:
+        :math:`\|r\|_{M^{-1}} / \|b\|_{M^{-1}}` with the lumped masses
+        :obj:`mass` (the norm of a load vector), below :obj:`tol`, or
+        :obj:`max_iter` cycles. :obj:`cycle` is ``'V'``, ``'W'`` or
+        ``'F'``. Without a hierarchy (fewer points than its lower bound)
+        the system is solved directly and :attr:`info` says so. Returns
+        :math:`x`; :attr:`info` holds a :class:`SolveInfo`."""
+        if cycle not in CYCLES:
+            raise ValueError(f"'cycle' must be one of {CYCLES}, got "
+                             f"{cycle!r}")
+        if criterion not in CRITERIA:
+            raise ValueError(f"'criterion' must be one of {CRITERIA}, got "
+                             f"{criterion!r}")
+        levels = self.setup(A)
+        A = levels.A[0]
+        b = np.asarray(b, dtype=np.float64)
+        if b.shape != (A.shape[0], ):
+            raise ValueError(f"'b' must have shape ({A.shape[0]},), got "
+                             f"{b.shape}")
+        if not np.all(np.isfinite(b)):
+            raise ValueError("'b' holds NaN or infinite entries")
+        weight = np.ones_like(b)
+        if criterion == 'mass':
+            if mass is None:
+                raise ValueError("criterion='mass' needs the lumped "
+                                 "masses: pass mass=...")
+            mass = np.asarray(mass, dtype=np.float64).reshape(-1)
+            if mass.shape != b.shape or not (mass > 0).all():
+                raise ValueError("'mass' must hold one positive value per "
+                                 "point")
+            weight = 1.0 / mass
+        start = time.perf_counter()
+        info = self.info
+        if len(levels.A) == 1:
+            info.direct = ('no coarse level (fewer points than the '
+                           'hierarchy lower bound): one direct solve')
+            x = levels.coarse.solve(b)
+            info.converged = True
+            info.solve_time = time.perf_counter() - start
+            return x
+        norm = lambda r: float(np.sqrt(np.sum(weight * r * r)))  # noqa
+        b_norm = norm(b)
+        x = np.zeros_like(b) if x0 is None else np.array(x0, np.float64)
+        if b_norm == 0:
+            info.converged = True
+            info.solve_time = time.perf_counter() - start
+            return np.zeros_like(b)
+        for _ in range(max_iter):
+            x = self._cycle(levels, 0, b, x, cycle, pre, post)
+            info.iterations += 1
+            info.residuals.append(norm(b - A @ x) / b_norm)
+            if info.residuals[-1] < tol:
+                info.converged = True
+                break
+        info.solve_time = time.perf_counter() - start
+        return x
+
+    def as_preconditioner(self, A, cycle: str = 'V', pre: int = 2,
+                          post: int = 2) -> LinearOperator:
+        """One symmetric cycle from a zero guess, as a scipy
+        :class:`~scipy.sparse.linalg.LinearOperator` for conjugate
+        gradients (``scipy.sparse.linalg.cg(A, b, M=...)``)."""
+        levels = self.setup(A)
+        n = levels.A[0].shape[0]
+
+        def apply(r):
+            r = np.asarray(r, dtype=np.float64).reshape(-1)
+            if len(levels.A) == 1:
+                return levels.coarse.solve(r)
+            return self._cycle(levels, 0, r, np.zeros(n), cycle, pre, post)
+
+        return LinearOperator((n, n), matvec=apply, dtype=np.float64)
+
+    def __repr__(self) -> str:
+        sizes = [self.num_points] + [P.shape[1] for P in self.prolongations]
+        return f'{self.__class__.__name__}(levels={sizes})'

@@ -1,0 +1,76 @@
+"""GravoPool / GravoUnpool: constants, adjointness with the prolongation,
+batched equals per-example, gradients, bad input."""
+import pytest
+import torch
+from torch_geometric.data import Batch, Data
+
+from tg_intrinsic.pool import GravoPool, GravoUnpool
+from tg_intrinsic.transforms import GravoHierarchy
+
+from ..conftest import grid_mesh, icosphere
+
+
+def hierarchy(pos, face):
+    return GravoHierarchy(lower_bound=20, max_levels=2)(
+        Data(pos=pos, face=face))
+
+
+def test_constants_and_adjointness():
+    pos, face = icosphere(4)
+    data = hierarchy(pos, face)
+    index, weight = data.prolong_index_1, data.prolong_weight_1
+    n, m = pos.size(0), data.pos_1.size(0)
+    ones = torch.ones(n, 3, dtype=torch.float64)
+    assert torch.allclose(GravoPool()(ones, index, weight, m),
+                          torch.ones(m, 3, dtype=torch.float64))
+    assert torch.allclose(GravoUnpool()(torch.ones(m, dtype=torch.float64),
+                                        index, weight, n),
+                          torch.ones(n, dtype=torch.float64))
+    # Unpooling is P; pooling is D^-1 P^T with D the column sums of P.
+    g = torch.Generator().manual_seed(0)
+    x = torch.randn(n, generator=g, dtype=torch.float64)
+    y = torch.randn(m, generator=g, dtype=torch.float64)
+    column = torch.zeros(m, dtype=torch.float64).index_add_(0, index[1],
+                                                            weight)
+    pooled = GravoPool()(x, index, weight, m) * column
+    assert torch.allclose((pooled * y).sum(),
+                          (x * GravoUnpool()(y, index, weight, n)).sum())
+
+
+def test_batched_equals_per_example_and_gradients():
+    a = hierarchy(*icosphere(3))
+    b = hierarchy(*grid_mesh(25, jitter=0.2))
+    batch = Batch.from_data_list([a, b])
+    g = torch.Generator().manual_seed(1)
+    x = torch.randn(batch.num_nodes, 4, generator=g, dtype=torch.float64,
+                    requires_grad=True)
+    pooled = GravoPool()(x, batch.prolong_index_1, batch.prolong_weight_1,
+                         batch.pos_1.size(0))
+    n_a, m_a = a.pos.size(0), a.pos_1.size(0)
+    alone = GravoPool()(x[:n_a], a.prolong_index_1, a.prolong_weight_1, m_a)
+    assert torch.allclose(pooled[:m_a], alone)
+    back = GravoUnpool()(pooled, batch.prolong_index_1,
+                         batch.prolong_weight_1, batch.num_nodes)
+    assert torch.allclose(back[:n_a], GravoUnpool()(
+        alone, a.prolong_index_1, a.prolong_weight_1, n_a))
+    assert torch.autograd.gradcheck(
+        lambda t: GravoUnpool()(GravoPool()(t, a.prolong_index_1,
+                                            a.prolong_weight_1, m_a),
+                                a.prolong_index_1, a.prolong_weight_1, n_a),
+        (x[:n_a].detach().clone().requires_grad_(), ))
+
+
+def test_bad_input():
+    data = hierarchy(*icosphere(3))
+    x = torch.randn(data.pos.size(0), 2, dtype=torch.float64)
+    with pytest.raises(ValueError, match=r'\[2, nnz\]'):
+        GravoPool()(x, data.prolong_index_1[0], data.prolong_weight_1, 10)
+    with pytest.raises(ValueError, match='one weight'):
+        GravoPool()(x, data.prolong_index_1, data.prolong_weight_1[:-1], 10)
+    with pytest.raises(ValueError, match='rows'):
+        GravoPool()(x[:10], data.prolong_index_1, data.prolong_weight_1,
+                    data.pos_1.size(0))
+    with pytest.raises(ValueError, match='rows'):
+        GravoUnpool()(x[:3], data.prolong_index_1, data.prolong_weight_1,
+                      data.pos.size(0))
+    assert repr(GravoPool()) == 'GravoPool()'

@@ -1,0 +1,53 @@
+import torch
+from torch import Tensor
+
+
+def _check_prolongation(x: Tensor, prolong_index: Tensor,
+                        prolong_weight: Tensor, rows: int, side: str):
+    if prolong_index.dim() != 2 or prolong_index.size(0) != 2:
+        raise ValueError(f"'prolong_index' must be [2, nnz], got "
+                         f"{list(prolong_index.shape)}")
+    if prolong_weight.shape != prolong_index.shape[1:]:
+        raise ValueError("'prolong_weight' must hold one weight per column "
+                         "of 'prolong_index'")
+    index = prolong_index[0 if side == 'fine' else 1]
+    if index.numel() and int(index.max()) >= rows:
+        raise ValueError(f"'prolong_index' refers to {side} point "
+                         f"{int(index.max())} but x has {rows} rows")
+
+
+class GravoPool(torch.nn.Module):
+    r"""Pooling to the next level of a Gravo MG hierarchy by the normalised
+    restriction: every coarse point takes the average of the fine points
+    that interpolate from it, weighted by the prolongation,
+
+    .. math::
+        x^{(l+1)}_c = \frac{\sum_i P_{ic}\, x^{(l)}_i}{\sum_i P_{ic}},
+
+    so constants stay constant. Built from ``prolong_index_l`` /
+    ``prolong_weight_l`` of :class:`~tg_intrinsic.transforms.GravoHierarchy`
+    (batches are block diagonal, so no batch vector is needed).
+
+    Shapes:
+        - **input:** x :math:`(N_l, *)`, prolong_index :math:`(2, nnz)`
+          (fine, coarse), prolong_weight :math:`(nnz)`, num_coarse
+          :math:`N_{l+1}`
+        - **output:** :math:`(N_{l+1}, *)`
+    """
+    def forward(self, x: Tensor, prolong_index: Tensor,
+                prolong_weight: Tensor, num_coarse: int) -> Tensor:
+        _check_prolongation(x, prolong_index, prolong_weight, x.size(0),
+                            'fine')
+        fine, coarse = prolong_index
+        weight = prolong_weight.to(x.dtype)
+        shape = (-1, ) + (1, ) * (x.dim() - 1)
+        out = x.new_zeros((num_coarse, ) + x.shape[1:]).index_add_(
+            0, coarse, x[fine] * weight.view(shape))
+        total = weight.new_zeros(num_coarse).index_add_(0, coarse, weight)
+        if bool((total <= 0).any()):
+            raise ValueError("a coarse point receives no weight from any "
+                             "fine point; the hierarchy is inconsistent")
+        return out / total.view(shape)
+
+    def __repr__(self) -> str:
+        return f'{self.__class__.__name__}()'

@@ -10,6 +10,7 @@ install_requires = [
     'trimesh>=4.0',
     'numba>=0.59',
     'pyamg>=5.0',
+    'robust-laplacian>=0.2.7',
     'tqdm>=4.60',
     'matplotlib>=3.7',
 ]

@@ -1,4 +1,5 @@
 """Solvers for linear systems on surfaces."""
 from .gravo_mg import GravoMG, SolveInfo
+from .systems import poisson, smooth, stiffness_and_mass
 
-__all__ = ['GravoMG', 'SolveInfo']
+__all__ = ['GravoMG', 'SolveInfo', 'smooth', 'poisson', 'stiffness_and_mass']

@@ -165,3 +165,20 @@ def test_bad_arguments():
     with pytest.raises(ValueError, match='above 1'):
         gravo_hierarchy(pos, face_edges(face), ratio=1.0)
     assert gravo_hierarchy(pos, face_edges(face), lower_bound=1000) == []
+
+
+def test_isolated_points_stay_their_own_coarse_point():
+    # A point on no edge cannot be interpolated from anything else: it is
+    # kept as its own coarse point on every level (weight 1).
+    pos, face = sphere(4)
+    pos = np.concatenate([pos, [[5.0, 5.0, 5.0]]])
+    levels = gravo_hierarchy(pos, face_edges(face), lower_bound=30)
+    assert len(levels) == 2
+    num = pos.shape[0]
+    for level in levels:
+        check_prolongation(level, num)
+        lonely = level.cluster[num - 1]
+        assert np.bincount(level.cluster)[lonely] == 1
+        rows, cols = level.prolong_index
+        assert level.prolong_weight[rows == num - 1].tolist() == [1.0]
+        num = level.sample.size

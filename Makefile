@@ -8,7 +8,7 @@ TORCH_INSTALL ?= pip install torch==2.13.0
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test train benchmarks clean
+.PHONY: install demo test train benchmarks clean gravomg-env
 
 $(STAMP): setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -30,6 +30,12 @@ test: $(STAMP)
 
 benchmarks: $(STAMP)
 	for script in benchmarks/*.py; do $(BIN)/python $$script || exit 1; done
+
+# The original Gravo MG (PyPI gravomg 0.0.4) needs numpy < 2: a separate
+# environment for the oracle test and benchmark (tests skip without it).
+gravomg-env:
+	$(PYTHON) -m venv .gravomg-env
+	.gravomg-env/bin/pip install "numpy==1.26.4" "scipy<1.14" "gravomg==0.0.4"
 
 clean:
 	rm -rf $(VENV) build *.egg-info data

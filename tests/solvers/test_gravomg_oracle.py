@@ -4,7 +4,6 @@ Python that has it) on the same system: level sizes and cycle counts.
 Skipped where that environment is absent."""
 import os
 import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -48,8 +47,6 @@ def test_level_sizes_and_cycles_against_the_original(tmp_path):
     assert np.all(np.abs(np.array(ours) / theirs['sizes'] - 1) < 0.1)
     x = solver.solve(A, b, tol=1e-8)
     assert np.linalg.norm(x - theirs['x']) / np.linalg.norm(x) < 1e-6
-    print('cycles to 1e-8: ours', solver.info.iterations, 'original',
-          len(theirs['residuals']), file=sys.stderr)
-    if solver.info.iterations > len(theirs['residuals']):
-        pytest.xfail(f"open (issue 5): {solver.info.iterations} cycles "
-                     f"against the original's {len(theirs['residuals'])}")
+    # Forward Gauss-Seidel before and after, as the original: no more
+    # cycles than it needs (7 here; backward post-smoothing took 9).
+    assert solver.info.iterations <= len(theirs['residuals'])

@@ -81,8 +81,9 @@ def _sift_up(hd, hv, k):  # pragma: no cover (numba)
 
 
 @njit(cache=True)
-def _sift_down(hd, hv, size):  # pragma: no cover (numba)
-    k = 0
+def _sift_down(hd, hv, k, size):  # pragma: no cover (numba)
+    """Moves entry ``k`` of a binary min-heap of ``size`` entries (keys
+    ``hd``, values ``hv``) down to its place; shared with voronoi.py."""
     while True:
         left = 2 * k + 1
         if left >= size:
@@ -136,7 +137,7 @@ def march(face, length, vf_ptr, vf_face, vf_corner, sources, limit, cap,
         heap -= 1
         hd[0] = hd[heap]
         hv[0] = hv[heap]
-        _sift_down(hd, hv, heap)
+        _sift_down(hd, hv, 0, heap)
         if final[v] or d > dist[v]:
             continue  # a stale heap entry (lazy deletion)
         if d >= limit:

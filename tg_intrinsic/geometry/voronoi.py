@@ -8,6 +8,7 @@ from numba import njit
 from torch import Tensor
 
 from ._checks import check_points, check_tensor
+from ._fmm import _sift_down, _sift_up
 
 
 def graph_voronoi(pos: Tensor, edge_index: Tensor, seeds: Tensor,
@@ -113,29 +114,6 @@ def _multi_source_dijkstra(indptr, indices, weights, seeds, n
                 dist[v] = nd
                 cell[v] = cell[u]
                 heap_d[size], heap_v[size] = nd, v
-                k = size
+                _sift_up(heap_d, heap_v, size)
                 size += 1
-                while k > 0:  # sift up
-                    parent = (k - 1) // 2
-                    if heap_d[parent] <= heap_d[k]:
-                        break
-                    heap_d[parent], heap_d[k] = heap_d[k], heap_d[parent]
-                    heap_v[parent], heap_v[k] = heap_v[k], heap_v[parent]
-                    k = parent
     return cell, dist
-
-
-@njit(cache=True)
-def _sift_down(heap_d, heap_v, k, size):  # pragma: no cover (numba)
-    while True:
-        left = 2 * k + 1
-        if left >= size:
-            return
-        small = left
-        if left + 1 < size and heap_d[left + 1] < heap_d[left]:
-            small = left + 1
-        if heap_d[k] <= heap_d[small]:
-            return
-        heap_d[k], heap_d[small] = heap_d[small], heap_d[k]
-        heap_v[k], heap_v[small] = heap_v[small], heap_v[k]
-        k = small

@@ -5,6 +5,7 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 import scipy.sparse as sp
+from pyamg.relaxation.relaxation import gauss_seidel
 from scipy.sparse.linalg import LinearOperator, splu
 
 from tg_intrinsic.geometry.gravo import gravo_hierarchy
@@ -165,7 +166,6 @@ class GravoMG:
 
     def _cycle(self, levels: _Levels, level: int, b, x, kind: str, pre: int,
                post: int, post_sweep: str = 'forward'):
-        from pyamg.relaxation.relaxation import gauss_seidel
         A = levels.A[level]
         if level == len(levels.A) - 1:
             return levels.coarse.solve(b)

@@ -7,11 +7,12 @@ import math
 from typing import List, NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
-from .voronoi import _multi_source_dijkstra
+from .voronoi import _dijkstra_from
 
 WEIGHTINGS = ('barycentric', 'inverse_distance', 'uniform')
+VORONOI = ('exact', 'sweep')
 
 
 class GravoLevel(NamedTuple):
@@ -30,40 +31,125 @@ class GravoLevel(NamedTuple):
 
 def _csr(edge_index: np.ndarray, n: int):
     """Symmetric adjacency (sorted, no self-loops, no repeats) as CSR."""
-    src, dst = edge_index
-    keep = src != dst
-    a = np.concatenate([src[keep], dst[keep]])
-    b = np.concatenate([dst[keep], src[keep]])
-    key = np.unique(a.astype(np.int64) * n + b)
-    a, b = key // n, key % n
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(a, minlength=n), out=indptr[1:])
-    return indptr, b.astype(np.int64)
+    src = np.ascontiguousarray(edge_index[0], dtype=np.int64)
+    dst = np.ascontiguousarray(edge_index[1], dtype=np.int64)
+    return _csr_kernel(src, dst, n)
 
 
 @njit(cache=True)
-def _sample_sweep(indptr, indices, pos, radius):  # pragma: no cover (numba)
-    """Keeps every still-eligible point (in index order) and makes the
-    points of its 2-ring within ``radius`` ineligible."""
+def _csr_kernel(src, dst, n):  # pragma: no cover (numba)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    for e in range(src.shape[0]):
+        if src[e] != dst[e]:
+            indptr[src[e] + 1] += 1
+            indptr[dst[e] + 1] += 1
+    for v in range(n):
+        indptr[v + 1] += indptr[v]
+    fill = indptr[:-1].copy()
+    indices = np.empty(indptr[n], dtype=np.int64)
+    for e in range(src.shape[0]):
+        a, b = src[e], dst[e]
+        if a != b:
+            indices[fill[a]] = b
+            fill[a] += 1
+            indices[fill[b]] = a
+            fill[b] += 1
+    # Sort every row and drop repeats, compacting in place.
+    out = 0
+    start = 0
+    for v in range(n):
+        stop = indptr[v + 1]
+        if stop - start > 32:
+            indices[start:stop] = np.sort(indices[start:stop])
+        else:  # insertion sort: rows of meshes and k-nn graphs are short
+            for k in range(start + 1, stop):
+                value = indices[k]
+                j = k - 1
+                while j >= start and indices[j] > value:
+                    indices[j + 1] = indices[j]
+                    j -= 1
+                indices[j + 1] = value
+        indptr[v] = out
+        for k in range(start, stop):
+            if k == start or indices[k] != indices[k - 1]:
+                indices[out] = indices[k]
+                out += 1
+        start = stop
+    indptr[n] = out
+    return indptr, indices[:out].copy()
+
+
+@njit(cache=True)
+def _edge_lengths(indptr, indices, pos):  # pragma: no cover (numba)
+    length = np.empty(indices.shape[0])
+    for v in range(indptr.shape[0] - 1):
+        for p in range(indptr[v], indptr[v + 1]):
+            u = indices[p]
+            length[p] = math.sqrt((pos[u, 0] - pos[v, 0]) ** 2
+                                  + (pos[u, 1] - pos[v, 1]) ** 2
+                                  + (pos[u, 2] - pos[v, 2]) ** 2)
+    return length
+
+
+@njit(cache=True)
+def _sample_sweep(indptr, indices, length, radius):  # pragma: no cover
+    """Keeps every still-eligible point (in index order); the neighbours
+    closer than ``radius``, and their neighbours within that path length,
+    become ineligible. Also returns the shortest such path length to a
+    sample and that sample (as the original's sweep records them)."""
     n = indptr.shape[0] - 1
     eligible = np.ones(n, dtype=np.bool_)
-    keep = np.zeros(n, dtype=np.bool_)
-    r2 = radius * radius
+    sample = np.empty(n, dtype=np.int64)
+    dist = np.full(n, np.inf)
+    nearest = np.full(n, -1, dtype=np.int64)
+    m = 0
     for v in range(n):
         if not eligible[v]:
             continue
-        keep[v] = True
+        sample[m] = v
         eligible[v] = False
+        dist[v] = 0.0
+        nearest[v] = m
         for p in range(indptr[v], indptr[v + 1]):
             u = indices[p]
-            for q in range(indptr[u], indptr[u + 1] + 1):
-                w = u if q == indptr[u + 1] else indices[q]
-                d = 0.0
-                for k in range(3):
-                    d += (pos[w, k] - pos[v, k]) ** 2
-                if d < r2:
+            d = length[p]
+            if d >= radius:
+                continue
+            eligible[u] = False
+            if d < dist[u]:
+                dist[u] = d
+                nearest[u] = m
+            for q in range(indptr[u], indptr[u + 1]):
+                w = indices[q]
+                d2 = d + length[q]
+                if d2 < radius:
                     eligible[w] = False
-    return np.flatnonzero(keep)
+                    if d2 < dist[w]:
+                        dist[w] = d2
+                        nearest[w] = m
+        m += 1
+    return sample[:m].copy(), dist, nearest
+
+
+@njit(cache=True)
+def _coarse_edges(indptr, indices, cluster):  # pragma: no cover (numba)
+    """The pairs of cells that touch: (cluster[v], cluster[u]) for every
+    fine edge v < u that crosses cells."""
+    count = 0
+    for sweep in range(2):
+        if sweep == 1:
+            src = np.empty(count, dtype=np.int64)
+            dst = np.empty(count, dtype=np.int64)
+            count = 0
+        for v in range(indptr.shape[0] - 1):
+            for p in range(indptr[v], indptr[v + 1]):
+                u = indices[p]
+                if u > v and cluster[u] != cluster[v]:
+                    if sweep == 1:
+                        src[count] = cluster[v]
+                        dst[count] = cluster[u]
+                    count += 1
+    return src, dst
 
 
 @njit(cache=True)
@@ -102,26 +188,27 @@ def _triangles(indptr, indices):  # pragma: no cover (numba)
 @njit(cache=True)
 def _closest_on_triangle(p, a, b, c):  # pragma: no cover (numba)
     """Barycentric coordinates of the point of triangle abc closest to p
-    (Ericson, Real-Time Collision Detection, 5.1.5)."""
-    ab = b - a
-    ac = c - a
-    ap = p - a
-    d1 = np.dot(ab, ap)
-    d2 = np.dot(ac, ap)
+    (Ericson, Real-Time Collision Detection, 5.1.5); scalar arithmetic, as
+    this runs once per fine point and candidate triangle."""
+    abx, aby, abz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    acx, acy, acz = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    apx, apy, apz = p[0] - a[0], p[1] - a[1], p[2] - a[2]
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
     if d1 <= 0.0 and d2 <= 0.0:
         return 1.0, 0.0, 0.0
-    bp = p - b
-    d3 = np.dot(ab, bp)
-    d4 = np.dot(ac, bp)
+    bpx, bpy, bpz = p[0] - b[0], p[1] - b[1], p[2] - b[2]
+    d3 = abx * bpx + aby * bpy + abz * bpz
+    d4 = acx * bpx + acy * bpy + acz * bpz
     if d3 >= 0.0 and d4 <= d3:
         return 0.0, 1.0, 0.0
     vc = d1 * d4 - d3 * d2
     if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
         v = d1 / (d1 - d3)
         return 1.0 - v, v, 0.0
-    cp = p - c
-    d5 = np.dot(ab, cp)
-    d6 = np.dot(ac, cp)
+    cpx, cpy, cpz = p[0] - c[0], p[1] - c[1], p[2] - c[2]
+    d5 = abx * cpx + aby * cpy + abz * cpz
+    d6 = acx * cpx + acy * cpy + acz * cpz
     if d6 >= 0.0 and d5 <= d6:
         return 0.0, 0.0, 1.0
     vb = d5 * d2 - d1 * d6
@@ -140,99 +227,173 @@ def _closest_on_triangle(p, a, b, c):  # pragma: no cover (numba)
     return 1.0 - v - w, v, w
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _prolong(pos, coarse_pos, cluster, tri_ptr, tri_list, triangles,
              nbr_ptr, nbr, mode):  # pragma: no cover (numba)
     """Row of P for every fine point: the closest candidate triangle
     incident to its own cell's coarse point (mode 0: barycentric weights
     of the closest point, 2: uniform), else, or with mode 1, inverse
     distance weights to the three closest of that coarse point and its
-    coarse neighbours."""
+    coarse neighbours. Rows are independent, so they run in parallel."""
     n = pos.shape[0]
     cols = np.full((n, 3), -1, dtype=np.int64)
     vals = np.zeros((n, 3))
-    for i in range(n):
-        s = cluster[i]
-        p = pos[i]
-        best = np.inf
+    for i in prange(n):
+        found = False
         if mode != 1:
-            for k in range(tri_ptr[s], tri_ptr[s + 1]):
-                t = tri_list[k]
-                a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
-                u, v, w = _closest_on_triangle(p, coarse_pos[a],
-                                               coarse_pos[b], coarse_pos[c])
-                if u < 0.0:
-                    continue
-                q = u * coarse_pos[a] + v * coarse_pos[b] + w * coarse_pos[c]
-                d = np.sum((q - p) ** 2)
-                if d < best:
-                    best = d
-                    cols[i, 0], cols[i, 1], cols[i, 2] = a, b, c
-                    if mode == 2:
-                        vals[i, 0] = vals[i, 1] = vals[i, 2] = 1.0 / 3.0
-                    else:
-                        vals[i, 0], vals[i, 1], vals[i, 2] = u, v, w
-        if best < np.inf:
-            continue
-        # Inverse distance weights to the three closest candidates.
-        m = nbr_ptr[s + 1] - nbr_ptr[s] + 1
-        cand = np.empty(m, dtype=np.int64)
-        dist = np.empty(m)
-        cand[0] = s
-        for k in range(nbr_ptr[s], nbr_ptr[s + 1]):
-            cand[k - nbr_ptr[s] + 1] = nbr[k]
-        for k in range(m):
-            dist[k] = np.sqrt(np.sum((coarse_pos[cand[k]] - p) ** 2))
-        order = np.argsort(dist)
-        total = 0.0
-        for k in range(min(3, m)):
-            c = cand[order[k]]
-            if dist[order[k]] == 0.0:  # on a coarse point: all weight there
-                cols[i, :] = -1
-                vals[i, :] = 0.0
-                cols[i, 0], vals[i, 0], total = c, 1.0, 1.0
-                break
-            cols[i, k] = c
-            vals[i, k] = 1.0 / dist[order[k]]
-            total += vals[i, k]
-        for k in range(3):
-            vals[i, k] /= total
+            found = _closest_triangle(pos[i], coarse_pos, tri_list[
+                tri_ptr[cluster[i]]:tri_ptr[cluster[i] + 1]], triangles,
+                mode == 2, cols[i], vals[i])
+        if not found:
+            s = cluster[i]
+            _inverse_distance(pos[i], coarse_pos, s,
+                              nbr[nbr_ptr[s]:nbr_ptr[s + 1]], cols[i],
+                              vals[i])
     return cols, vals
 
 
+@njit(cache=True)
+def _closest_triangle(p, coarse_pos, candidates, triangles, uniform, cols,
+                      vals):  # pragma: no cover (numba)
+    best = np.inf
+    for t in candidates:
+        a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        u, v, w = _closest_on_triangle(p, coarse_pos[a], coarse_pos[b],
+                                       coarse_pos[c])
+        if u < 0.0:
+            continue
+        d = 0.0
+        for k in range(3):
+            q = (u * coarse_pos[a, k] + v * coarse_pos[b, k]
+                 + w * coarse_pos[c, k])
+            d += (q - p[k]) ** 2
+        if d < best:
+            best = d
+            cols[0], cols[1], cols[2] = a, b, c
+            if uniform:
+                vals[0] = vals[1] = vals[2] = 1.0 / 3.0
+            else:
+                vals[0], vals[1], vals[2] = u, v, w
+    return best < np.inf
+
+
+@njit(cache=True)
+def _inverse_distance(p, coarse_pos, s, neighbours, cols,
+                      vals):  # pragma: no cover (numba)
+    """Inverse distance weights to the three closest of coarse point s
+    and its coarse neighbours; all weight to one of them if p is on it."""
+    m = neighbours.shape[0] + 1
+    cand = np.empty(m, dtype=np.int64)
+    dist = np.empty(m)
+    cand[0] = s
+    cand[1:] = neighbours
+    for k in range(m):
+        d = 0.0
+        for j in range(3):
+            d += (coarse_pos[cand[k], j] - p[j]) ** 2
+        dist[k] = math.sqrt(d)
+    order = np.argsort(dist)
+    total = 0.0
+    for k in range(min(3, m)):
+        c = cand[order[k]]
+        if dist[order[k]] == 0.0:
+            cols[:] = -1
+            vals[:] = 0.0
+            cols[0], vals[0], total = c, 1.0, 1.0
+            break
+        cols[k] = c
+        vals[k] = 1.0 / dist[order[k]]
+        total += vals[k]
+    for k in range(3):
+        vals[k] /= total
+
+
+@njit(cache=True)
+def _compact(cols, vals):  # pragma: no cover (numba)
+    """The non-zeros of the (N, 3) rows as (2, nnz) indices and weights."""
+    nnz = 0
+    for i in range(cols.shape[0]):
+        for k in range(3):
+            nnz += cols[i, k] >= 0 and vals[i, k] > 0.0
+    index = np.empty((2, nnz), dtype=np.int64)
+    weight = np.empty(nnz)
+    nnz = 0
+    for i in range(cols.shape[0]):
+        for k in range(3):
+            if cols[i, k] >= 0 and vals[i, k] > 0.0:
+                index[0, nnz], index[1, nnz] = i, cols[i, k]
+                weight[nnz] = vals[i, k]
+                nnz += 1
+    return index, weight
+
+
 def gravo_level(pos: np.ndarray, edge_index: np.ndarray, ratio: float = 8.0,
-                shift: bool = True, weighting: str = 'barycentric'
-                ) -> GravoLevel:
+                shift: bool = True, weighting: str = 'barycentric',
+                voronoi: str = 'exact') -> GravoLevel:
     r"""One Gravo MG coarsening step of the points ``pos`` (N, 3) with the
     neighbour graph ``edge_index`` (2, E; used in both directions).
 
-    Samples are kept greedily in one sweep; every kept point makes the
-    points of its 2-ring closer than :math:`r = \text{ratio}^{1/3}\,\bar h`
-    (:math:`\bar h` the mean edge length) ineligible. Every point joins the
-    graph Voronoi cell of its nearest sample (multi-source Dijkstra); two
-    samples are coarse neighbours when their cells touch; candidate
-    triangles are the 3-cliques of the coarse graph. With ``shift`` every
-    coarse point moves to the mean of its cell. Row :math:`i` of the
-    prolongation :math:`P` holds the barycentric coordinates of the point
-    closest to :math:`p_i` on the closest candidate triangle incident to its
-    cell's coarse point, or, where there is none, inverse distance weights
-    to the three closest of that coarse point and its coarse neighbours, so
-    rows are non-negative, sum to 1 and have at most 3 non-zeros."""
+    Samples are kept greedily in one sweep in index order; every kept
+    point makes its neighbours closer than
+    :math:`r = \text{ratio}^{1/3}\,\bar h` (:math:`\bar h` the mean edge
+    length), and their neighbours within that path length, ineligible.
+    With ``voronoi='exact'`` every point joins the graph Voronoi cell of its
+    nearest sample (multi-source Dijkstra); ``'sweep'`` keeps the sample
+    that claimed it during the sweep unless a Dijkstra from the samples
+    that only continues through improved points finds a shorter path, as
+    the original implementation does. Two samples are coarse neighbours
+    when their cells touch; candidate triangles are the 3-cliques of the
+    coarse graph. With ``shift`` every coarse point moves to the mean of its
+    cell. Row :math:`i` of the prolongation :math:`P` holds the barycentric
+    coordinates of the point closest to :math:`p_i` on the closest
+    candidate triangle incident to its cell's coarse point, or, where there
+    is none, inverse distance weights to the three closest of that coarse
+    point and its coarse neighbours, so rows are non-negative, sum to 1 and
+    have at most 3 non-zeros."""
     if weighting not in WEIGHTINGS:
         raise ValueError(f"'weighting' must be one of {WEIGHTINGS}, got "
                          f"{weighting!r}")
+    if voronoi not in VORONOI:
+        raise ValueError(f"'voronoi' must be one of {VORONOI}, got "
+                         f"{voronoi!r}")
+    pos, edge_index = _check_graph(pos, edge_index)
+    return _coarsen(pos, *_csr(edge_index, pos.shape[0]), ratio, shift,
+                    weighting, voronoi)[0]
+
+
+def _check_graph(pos, edge_index):
+    pos = np.ascontiguousarray(pos, dtype=np.float64)
+    edge_index = np.asarray(edge_index)
+    if pos.ndim != 2 or pos.shape[1] != 3:
+        raise ValueError(f"'pos' must have shape (N, 3), got {pos.shape}")
+    if not np.isfinite(pos).all():
+        raise ValueError("'pos' holds NaN or infinite coordinates")
+    if edge_index.ndim != 2 or edge_index.shape[0] != 2:
+        raise ValueError(f"'edge_index' must have shape (2, E), got "
+                         f"{edge_index.shape}")
+    if edge_index.size and (edge_index.min() < 0
+                            or edge_index.max() >= pos.shape[0]):
+        raise ValueError(f"'edge_index' must index the {pos.shape[0]} "
+                         f"points")
+    return pos, edge_index
+
+
+def _coarsen(pos, indptr, indices, ratio, shift, weighting, voronoi):
+    """gravo_level on a CSR graph; also returns the coarse CSR graph."""
     n = pos.shape[0]
-    indptr, indices = _csr(edge_index, n)
-    length = np.linalg.norm(pos[np.repeat(np.arange(n), np.diff(indptr))]
-                            - pos[indices], axis=1)
+    if indices.size == 0:
+        raise ValueError("the neighbour graph has no edges between distinct "
+                         "points; pass mesh edges or a k-nn graph")
+    length = _edge_lengths(indptr, indices, pos)
     radius = ratio ** (1.0 / 3.0) * float(length.mean())
-    sample = _sample_sweep(indptr, indices, pos, radius)
-    cluster, _ = _multi_source_dijkstra(indptr, indices, length, sample, n)
-    src, dst = edge_index
-    cross = cluster[src] != cluster[dst]
-    coarse_edges = np.stack([cluster[src][cross], cluster[dst][cross]])
+    sample, dist, cluster = _sample_sweep(indptr, indices, length, radius)
+    if voronoi == 'exact':
+        dist[:] = np.inf
+        cluster[:] = -1
+    _dijkstra_from(indptr, indices, length, sample, dist, cluster)
     m = sample.size
-    c_ptr, c_nbr = _csr(coarse_edges, m)
+    c_ptr, c_nbr = _csr(np.stack(_coarse_edges(indptr, indices, cluster)),
+                        m)
     coarse_edges = np.stack([np.repeat(np.arange(m), np.diff(c_ptr)),
                              c_nbr])
     if shift:
@@ -249,27 +410,36 @@ def gravo_level(pos: np.ndarray, edge_index: np.ndarray, ratio: float = 8.0,
     cols, vals = _prolong(pos, coarse_pos, cluster, tri_ptr, tri_list,
                           triangles, c_ptr, c_nbr,
                           WEIGHTINGS.index(weighting))
-    keep = (cols >= 0) & (vals > 0)
-    rows = np.repeat(np.arange(n), 3).reshape(n, 3)
-    return GravoLevel(sample, cluster, coarse_pos, coarse_edges,
-                      np.stack([rows[keep], cols[keep]]), vals[keep])
+    index, weight = _compact(cols, vals)
+    return GravoLevel(sample, cluster, coarse_pos, coarse_edges, index,
+                      weight), c_ptr, c_nbr
 
 
 def gravo_hierarchy(pos: np.ndarray, edge_index: np.ndarray,
                     ratio: float = 8.0, lower_bound: int = 1000,
                     max_levels: int = 10, shift: bool = True,
-                    weighting: str = 'barycentric') -> List[GravoLevel]:
+                    weighting: str = 'barycentric', voronoi: str = 'exact'
+                    ) -> List[GravoLevel]:
     """Coarsens with :func:`gravo_level` while the next level would keep at
     least ``lower_bound`` points, at most ``max_levels`` times."""
     if not (isinstance(ratio, (int, float)) and math.isfinite(ratio)
             and ratio > 1):
         raise ValueError(f"'ratio' must be a number above 1 (the factor by "
                          f"which each level shrinks), got {ratio!r}")
+    if weighting not in WEIGHTINGS:
+        raise ValueError(f"'weighting' must be one of {WEIGHTINGS}, got "
+                         f"{weighting!r}")
+    if voronoi not in VORONOI:
+        raise ValueError(f"'voronoi' must be one of {VORONOI}, got "
+                         f"{voronoi!r}")
+    pos, edge_index = _check_graph(pos, edge_index)
+    graph = _csr(edge_index, pos.shape[0])
     levels = []
     while len(levels) < max_levels and pos.shape[0] / ratio >= lower_bound:
-        level = gravo_level(pos, edge_index, ratio, shift, weighting)
+        level, *graph = _coarsen(pos, *graph, ratio, shift, weighting,
+                                 voronoi)
         if level.sample.size < lower_bound:
             break
         levels.append(level)
-        pos, edge_index = level.pos, level.edge_index
+        pos = level.pos
     return levels

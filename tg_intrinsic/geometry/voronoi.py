@@ -87,17 +87,89 @@ def _multi_source_dijkstra(indptr, indices, weights, seeds, n
                            ):  # pragma: no cover (numba)
     dist = np.full(n, np.inf)
     cell = np.full(n, -1, dtype=np.int64)
+    _dijkstra_from(indptr, indices, weights, seeds, dist, cell)
+    return cell, dist
+
+
+@njit(cache=True)
+def _dijkstra_from(indptr, indices, weights, seeds, dist, cell
+                   ):  # pragma: no cover (numba)
+    """Multi-source Dijkstra that updates ``dist`` and ``cell`` in place.
+    Only the seeds enter the queue, so finite starting distances elsewhere
+    are kept wherever no shorter path reaches them (Gravo MG's 'sweep'
+    correction); with infinite ones this is the exact graph Voronoi.
+
+    The queue is a ring of buckets of width ``delta`` = the shortest
+    positive edge (Dial's algorithm): a point taken from bucket b relaxes
+    its neighbours into buckets after b, so every bucket is final when
+    reached and there is no heap. Where edge lengths span too many buckets
+    (or there are no positive lengths) a binary heap is used instead."""
+    delta = np.inf
+    longest = 0.0
+    for w in weights:
+        if 0.0 < w < delta:
+            delta = w
+        longest = max(longest, w)
+    if delta == np.inf or longest / delta > 4.0 * dist.size + 64:
+        _heap_dijkstra_from(indptr, indices, weights, seeds, dist, cell)
+        return
+    ring = int(longest / delta) + 2
+    head = np.full(ring, -1, dtype=np.int64)
+    capacity = indices.size + seeds.size
+    following = np.empty(capacity, dtype=np.int64)
+    entry_v = np.empty(capacity, dtype=np.int64)
+    entry_d = np.empty(capacity)
+    used = 0
+    queued = np.zeros(dist.size, dtype=np.bool_)
+    for s in range(seeds.size):
+        v = seeds[s]
+        if not queued[v]:  # a repeated seed keeps its first index
+            queued[v] = True
+            dist[v] = 0.0
+            cell[v] = s
+            entry_v[used], entry_d[used] = v, 0.0
+            following[used], head[0] = head[0], used
+            used += 1
+    pending = used
+    bucket = 0
+    while pending > 0:
+        slot = bucket % ring
+        while head[slot] >= 0:
+            k = head[slot]
+            head[slot] = following[k]
+            pending -= 1
+            u, d = entry_v[k], entry_d[k]
+            if d > dist[u]:
+                continue  # a stale entry
+            for e in range(indptr[u], indptr[u + 1]):
+                v = indices[e]
+                nd = d + weights[e]
+                if nd < dist[v]:
+                    dist[v] = nd
+                    cell[v] = cell[u]
+                    t = int(nd / delta) % ring
+                    entry_v[used], entry_d[used] = v, nd
+                    following[used], head[t] = head[t], used
+                    used += 1
+                    pending += 1
+        bucket += 1
+
+
+@njit(cache=True)
+def _heap_dijkstra_from(indptr, indices, weights, seeds, dist, cell
+                        ):  # pragma: no cover (numba)
     heap_d = np.empty(indices.size + seeds.size)
     heap_v = np.empty(indices.size + seeds.size, dtype=np.int64)
     size = 0
+    queued = np.zeros(dist.size, dtype=np.bool_)
     for s in range(seeds.size):
         v = seeds[s]
-        if dist[v] > 0.0:
+        if not queued[v]:
+            queued[v] = True
             dist[v] = 0.0
             cell[v] = s
             heap_d[size], heap_v[size] = 0.0, v
             size += 1
-    # binary heap, lazy deletion
     for k in range(size // 2 - 1, -1, -1):
         _sift_down(heap_d, heap_v, k, size)
     while size > 0:
@@ -116,4 +188,3 @@ def _multi_source_dijkstra(indptr, indices, weights, seeds, n
                 heap_d[size], heap_v[size] = nd, v
                 _sift_up(heap_d, heap_v, size)
                 size += 1
-    return cell, dist

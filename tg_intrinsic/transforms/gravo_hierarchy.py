@@ -7,7 +7,7 @@ from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry import knn
 from tg_intrinsic.geometry._checks import (check_edge_index, check_faces,
                                            check_points)
-from tg_intrinsic.geometry.gravo import WEIGHTINGS, gravo_hierarchy
+from tg_intrinsic.geometry.gravo import VORONOI, WEIGHTINGS, gravo_hierarchy
 
 
 @functional_transform('gravo_hierarchy')
@@ -20,7 +20,9 @@ class GravoHierarchy(BaseTransform):
     else a :obj:`k`-nearest-neighbour graph of ``pos``. Every level keeps
     about one in :obj:`ratio` points, sampled in one sweep with the
     exclusion radius :math:`r = \text{ratio}^{1/3} \bar h`; fine points join
-    the graph Voronoi cell of their nearest sample, cells that touch make
+    the graph Voronoi cell of their nearest sample (exactly, or with
+    :obj:`voronoi='sweep'` as the original implementation's partial
+    correction of the cells the sweep claimed), cells that touch make
     coarse edges, and the prolongation interpolates on the closest coarse
     triangle (3-clique) incident to a point's own cell:
 
@@ -51,6 +53,9 @@ class GravoHierarchy(BaseTransform):
         weighting (str, optional): :obj:`'barycentric'`,
             :obj:`'inverse_distance'` or :obj:`'uniform'` (a third to each
             corner of the closest triangle). (default: :obj:`'barycentric'`)
+        voronoi (str, optional): :obj:`'exact'` (multi-source Dijkstra) or
+            :obj:`'sweep'` (the sweep's cells, corrected where the Dijkstra
+            reaches, as the original). (default: :obj:`'exact'`)
         k (int, optional): Neighbours of the graph built for point clouds
             without ``edge_index``. (default: :obj:`8`)
 
@@ -61,7 +66,8 @@ class GravoHierarchy(BaseTransform):
     """
     def __init__(self, ratio: float = 8.0, lower_bound: int = 1000,
                  max_levels: int = 10, shift: bool = True,
-                 weighting: str = 'barycentric', k: int = 8):
+                 weighting: str = 'barycentric', voronoi: str = 'exact',
+                 k: int = 8):
         if not isinstance(ratio, (int, float)) or not ratio > 1:
             raise ValueError(f"'ratio' must be a number above 1, got "
                              f"{ratio!r}")
@@ -73,11 +79,15 @@ class GravoHierarchy(BaseTransform):
         if weighting not in WEIGHTINGS:
             raise ValueError(f"'weighting' must be one of {WEIGHTINGS}, got "
                              f"{weighting!r}")
+        if voronoi not in VORONOI:
+            raise ValueError(f"'voronoi' must be one of {VORONOI}, got "
+                             f"{voronoi!r}")
         self.ratio = float(ratio)
         self.lower_bound = lower_bound
         self.max_levels = max_levels
         self.shift = shift
         self.weighting = weighting
+        self.voronoi = voronoi
         self.k = k
 
     def forward(self, data: Data) -> IntrinsicData:
@@ -100,7 +110,7 @@ class GravoHierarchy(BaseTransform):
         levels = gravo_hierarchy(
             pos.detach().cpu().double().numpy(), graph.cpu().numpy(),
             self.ratio, self.lower_bound, self.max_levels, self.shift,
-            self.weighting)
+            self.weighting, self.voronoi)
         data = IntrinsicData(**{k: v for k, v in data.to_dict().items()})
 
         def tensor(array, like):
@@ -119,4 +129,4 @@ class GravoHierarchy(BaseTransform):
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}(ratio={self.ratio}, '
                 f'lower_bound={self.lower_bound}, shift={self.shift}, '
-                f'weighting={self.weighting!r})')
+                f'weighting={self.weighting!r}, voronoi={self.voronoi!r})')

@@ -133,9 +133,15 @@ def test_preconditioned_conjugate_gradients():
 
 def test_from_transform_and_direct_fallback():
     pos, face = sphere(4)
+    # from_mesh builds the same levels as the transform
+    mesh = GravoMG.from_mesh(pos, face, lower_bound=50)
+    with pytest.raises(ValueError, match=r'\(F, 3\)'):
+        GravoMG.from_mesh(pos, face.T)
     data = GravoHierarchy(lower_bound=50)(Data(
         pos=torch.tensor(pos), face=torch.tensor(face).t().contiguous()))
     solver = GravoMG.from_data(data)
+    for a, b in zip(mesh.prolongations, solver.prolongations):
+        assert abs(a - b).max() < 1e-12
     A, m = mesh_system(pos, face)
     b = m.copy()
     x = solver.solve(A, b, tol=1e-9)

@@ -380,7 +380,6 @@ def _check_graph(pos, edge_index):
 
 def _coarsen(pos, indptr, indices, ratio, shift, weighting, voronoi):
     """gravo_level on a CSR graph; also returns the coarse CSR graph."""
-    n = pos.shape[0]
     if indices.size == 0:
         raise ValueError("the neighbour graph has no edges between distinct "
                          "points; pass mesh edges or a k-nn graph")
@@ -435,7 +434,7 @@ def gravo_hierarchy(pos: np.ndarray, edge_index: np.ndarray,
     pos, edge_index = _check_graph(pos, edge_index)
     graph = _csr(edge_index, pos.shape[0])
     levels = []
-    while len(levels) < max_levels and pos.shape[0] / ratio >= lower_bound:
+    while len(levels) < max_levels and pos.shape[0] > lower_bound:
         level, *graph = _coarsen(pos, *graph, ratio, shift, weighting,
                                  voronoi)
         if level.sample.size < lower_bound:

@@ -9,7 +9,8 @@ from pyamg.relaxation.relaxation import gauss_seidel
 from scipy.sparse.linalg import LinearOperator, splu
 
 from tg_intrinsic.geometry.gravo import gravo_hierarchy
-from tg_intrinsic.solvers._fingerprint import fingerprint
+from tg_intrinsic.solvers._kernels import (check_rows, fingerprint, galerkin,
+                                           matvec)
 from tg_intrinsic.solvers._torch_levels import TorchLevels
 
 CYCLES = ('V', 'W', 'F')
@@ -20,12 +21,13 @@ CRITERIA = ('relative', 'mass')
 class SolveInfo:
     """What a :meth:`GravoMG.solve` did: the iterations (cycles), the
     largest residual over the columns after each (relative, or
-    mass-weighted), whether it reached the tolerance, the setup time (only
+    mass-weighted) and the seconds since the solve began at each, whether it reached the tolerance, the setup time (only
     the cache lookup when the matrix was seen before: ``cached``) and the
     solve time in seconds, and ``direct`` with the reason when there was no
     hierarchy to cycle on."""
     iterations: int = 0
     residuals: List[float] = field(default_factory=list)
+    times: List[float] = field(default_factory=list)
     converged: bool = False
     setup_time: float = 0.0
     solve_time: float = 0.0
@@ -40,7 +42,19 @@ class _Levels:
     def __init__(self, A: sp.csr_matrix, prolongations, restrictions):
         self.A = [A]
         for P, R in zip(prolongations, restrictions):
-            self.A.append((R @ (self.A[-1] @ P)).tocsr())
+            self.A.append(galerkin(R, self.A[-1], P))
+        # Rows of P sum to 1, so a matrix that annihilates constants makes
+        # every Galerkin level do so. Tested on the coarsest, whose size is
+        # bounded: S + 1e-6 M on a unit-area mesh leaves 1e-10 of the row
+        # scale there, rounding 1e-16.
+        coarse = self.A[-1]
+        row_scale = float(abs(coarse).sum(1).max())
+        ones = np.ones(coarse.shape[0])
+        if np.linalg.norm(coarse @ ones) <= 1e-13 * row_scale * np.sqrt(
+                coarse.shape[0]):
+            raise ValueError("'A' annihilates constants, so it is singular "
+                             "(a pure Laplacian?); add a mass term, e.g. "
+                             "S + eta * M, or fix a value")
         self.coarse = splu(self.A[-1].tocsc(), permc_spec='MMD_AT_PLUS_A',
                            diag_pivot_thresh=0.0,
                            options={'SymmetricMode': True})
@@ -63,7 +77,9 @@ class GravoMG:
     post-smoothing takes 9), restricts the residual with
     :math:`P_l^\top`, corrects recursively, and solves the coarsest level
     directly. As a preconditioner the post-smoothing runs backward, which
-    makes the cycle a symmetric operator, as conjugate gradients need. The
+    makes the cycle a symmetric operator, as conjugate gradients need. A
+    torch right-hand side runs the torch backend instead (Chebyshev
+    smoothing, see :meth:`solve`) on its device. The
     Galerkin operators and the coarse factorisation are cached per matrix,
     so later solves with the same :math:`A` cost only cycles.
 
@@ -71,7 +87,8 @@ class GravoMG:
         prolongations (list of scipy.sparse matrices): :math:`P_l`, fine to
             coarse, shapes :math:`(n_l, n_{l+1})`. Build them with
             :meth:`from_data` (a :class:`~tg_intrinsic.transforms.
-            GravoHierarchy` result) or :meth:`from_points`.
+            GravoHierarchy` result), :meth:`from_mesh` or
+            :meth:`from_points`.
         cache_size (int, optional): Matrices whose setup is kept.
             (default: :obj:`4`)
     """
@@ -104,6 +121,19 @@ class GravoMG:
                 shape=(n, level.sample.size)))
             n = level.sample.size
         return cls(out)
+
+    @classmethod
+    def from_mesh(cls, pos: np.ndarray, face: np.ndarray,
+                  **hierarchy) -> 'GravoMG':
+        """Builds the hierarchy of a triangle mesh, ``pos`` (N, 3) and
+        ``face`` (F, 3), on its edges."""
+        face = np.asarray(face)
+        if face.ndim != 2 or face.shape[1] != 3:
+            raise ValueError(f"'face' must have shape (F, 3), got "
+                             f"{face.shape}")
+        edges = np.concatenate([face[:, [0, 1]], face[:, [1, 2]],
+                                face[:, [2, 0]]]).T
+        return cls.from_points(pos, edges, **hierarchy)
 
     @classmethod
     def from_data(cls, data) -> 'GravoMG':
@@ -140,20 +170,15 @@ class GravoMG:
 
     @staticmethod
     def _check(A: sp.csr_matrix):
-        if not np.all(np.isfinite(A.data)):
+        finite, scale, asymmetry = check_rows(A)
+        if not finite:
             raise ValueError("'A' holds NaN or infinite entries")
-        scale = abs(A).max() if A.nnz else 0.0
         if scale == 0:
             raise ValueError("'A' is zero")
-        if abs(A - A.T).max() > 1e-10 * scale:
+        if asymmetry > 1e-10 * scale:
             raise ValueError("'A' is not symmetric; Gravo MG (Galerkin "
                              "coarsening, Gauss-Seidel smoothing) needs a "
                              "symmetric positive definite matrix")
-        ones = np.ones(A.shape[0])
-        if np.abs(A @ ones).max() <= 1e-12 * scale * np.sqrt(A.shape[0]):
-            raise ValueError("'A' annihilates constants, so it is singular "
-                             "(a pure Laplacian?); add a mass term, e.g. "
-                             "S + eta * M, or fix a value")
 
     def setup(self, A) -> _Levels:
         """The cached Galerkin operators and coarse factorisation of A,
@@ -180,7 +205,7 @@ class GravoMG:
             return levels.coarse.solve(b)
         gauss_seidel(A, x, b, iterations=pre, sweep='forward')
         P = self.prolongations[level]
-        coarse_b = self.restrictions[level] @ (b - A @ x)
+        coarse_b = self.restrictions[level] @ (b - matvec(A, x))
         coarse_x = np.zeros_like(coarse_b)
         visits = 2 if kind == 'W' else 1
         for _ in range(visits):
@@ -273,6 +298,9 @@ class GravoMG:
 
             def norms(R):
                 return (weight * R * R).sum(0).sqrt().cpu().double().numpy()
+
+            def residual(X):
+                return B - A0 @ X
         else:
             A0 = levels.A[0]
             weight = weight[:, None]
@@ -288,6 +316,12 @@ class GravoMG:
 
             def norms(R):
                 return np.sqrt((weight * R * R).sum(0))
+
+            def residual(X):
+                if X.shape[1] == 1:
+                    return (B[:, 0] - matvec(A0, X[:, 0]))[:, None]
+                return np.stack([B[:, k] - matvec(A0, X[:, k])
+                                 for k in range(X.shape[1])], 1)
         if x0 is not None and X.shape != B.shape:
             raise ValueError(f"'x0' must have the shape of 'b', "
                              f"{tuple(b.shape)}")
@@ -296,7 +330,8 @@ class GravoMG:
         for _ in range(max_iter):
             X = step(X)
             info.iterations += 1
-            info.residuals.append(float((norms(B - A0 @ X) / b_norm).max()))
+            info.residuals.append(float((norms(residual(X)) / b_norm).max()))
+            info.times.append(time.perf_counter() - start)
             if info.residuals[-1] < tol:
                 info.converged = True
                 break

@@ -162,6 +162,10 @@ def test_bad_input():
     with pytest.raises(ValueError, match='symmetric'):
         solver.solve(A + sp.random(A.shape[0], A.shape[0], density=1e-4,
                                    random_state=0, format='csr'), b)
+    # A small asymmetry in every row (1e-6 relative) is found too.
+    rows = sp.diags(1 + 1e-6 * np.random.default_rng(9).random(A.shape[0]))
+    with pytest.raises(ValueError, match='symmetric'):
+        solver.solve((rows @ A).tocsr(), b)
     bad = A.copy()
     bad.data[0] = np.nan
     with pytest.raises(ValueError, match='NaN'):

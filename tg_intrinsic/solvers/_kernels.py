@@ -1,6 +1,6 @@
 """Compiled kernels for GravoMG on the CPU: a bit-exact fingerprint of a
-sparse matrix for the per-matrix cache, the input checks in one pass, a
-parallel sparse matrix-vector product (scipy's runs on one core) and the
+sparse matrix for the per-matrix cache, the input checks (symmetry by
+random probes), a parallel sparse matrix-vector product (scipy's runs on one core) and the
 Galerkin product on row blocks in threads."""
 import os
 from concurrent.futures import ThreadPoolExecutor
@@ -61,43 +61,24 @@ def fingerprint(A: sp.csr_matrix) -> str:
     return ''.join(lanes)
 
 
-@njit(cache=True, parallel=True)
-def _check_rows(indptr, indices, data):  # pragma: no cover (numba)
-    """Per row: all entries finite, the largest |a_ij| and the largest
-    |a_ij - a_ji| (rows sorted; a missing mirror counts as 0)."""
-    n = indptr.shape[0] - 1
-    finite = np.ones(n, dtype=np.bool_)
-    largest = np.zeros(n)
-    asymmetry = np.zeros(n)
-    for i in prange(n):
-        for p in range(indptr[i], indptr[i + 1]):
-            value = data[p]
-            if not np.isfinite(value):
-                finite[i] = False
-                continue
-            largest[i] = max(largest[i], abs(value))
-            j = indices[p]
-            lo, hi = indptr[j], indptr[j + 1]
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if indices[mid] < i:
-                    lo = mid + 1
-                else:
-                    hi = mid
-            mirror = data[lo] if lo < indptr[j + 1] and indices[lo] == i \
-                else 0.0
-            asymmetry[i] = max(asymmetry[i], abs(value - mirror))
-    return finite, largest, asymmetry
-
-
-def check_rows(A: sp.csr_matrix):
-    """(all finite, max |a_ij|, max |a_ij - a_ji|) of a CSR matrix."""
-    if not A.has_sorted_indices:
-        A.sort_indices()
-    if A.shape[0] == 0:
-        return True, 0.0, 0.0
-    finite, largest, asymmetry = _check_rows(A.indptr, A.indices, A.data)
-    return bool(finite.all()), float(largest.max()), float(asymmetry.max())
+def check_matrix(A: sp.csr_matrix):
+    """(all finite, max |a_ij|, symmetry defect) of a CSR matrix. The
+    defect is |u.(A v) - v.(A u)| / (|u| |A v| + |v| |A u|) for Gaussian
+    probes u, v: rounding keeps it near 1e-16 for a symmetric A; an
+    asymmetry in every entry of relative size d gives about d / sqrt(N),
+    one entry d / N. Two parallel products instead of a transpose (which
+    cost 60 ms at 160k vertices in random order)."""
+    finite = bool(np.isfinite(A.data).all())
+    if not finite or A.nnz == 0:
+        return finite, 0.0, 0.0
+    scale = float(np.abs(A.data).max())
+    rng = np.random.default_rng(0x5EED)
+    u, v = rng.normal(size=(2, A.shape[0]))
+    Av, Au = matvec(A, v), matvec(A, u)
+    size = np.linalg.norm(u) * np.linalg.norm(Av) \
+        + np.linalg.norm(v) * np.linalg.norm(Au)
+    defect = abs(u @ Av - v @ Au) / size if size > 0 else 0.0
+    return finite, scale, float(defect)
 
 
 @njit(cache=True, parallel=True)

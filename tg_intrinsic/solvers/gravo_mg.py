@@ -9,8 +9,8 @@ from pyamg.relaxation.relaxation import gauss_seidel
 from scipy.sparse.linalg import LinearOperator, splu
 
 from tg_intrinsic.geometry.gravo import gravo_hierarchy
-from tg_intrinsic.solvers._kernels import (check_rows, fingerprint, galerkin,
-                                           matvec)
+from tg_intrinsic.solvers._kernels import (check_matrix, fingerprint,
+                                           galerkin, matvec)
 from tg_intrinsic.solvers._torch_levels import TorchLevels
 
 CYCLES = ('V', 'W', 'F')
@@ -170,12 +170,12 @@ class GravoMG:
 
     @staticmethod
     def _check(A: sp.csr_matrix):
-        finite, scale, asymmetry = check_rows(A)
+        finite, scale, asymmetry = check_matrix(A)
         if not finite:
             raise ValueError("'A' holds NaN or infinite entries")
         if scale == 0:
             raise ValueError("'A' is zero")
-        if asymmetry > 1e-10 * scale:
+        if asymmetry > 1e-10:
             raise ValueError("'A' is not symmetric; Gravo MG (Galerkin "
                              "coarsening, Gauss-Seidel smoothing) needs a "
                              "symmetric positive definite matrix")

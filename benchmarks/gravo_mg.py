@@ -405,11 +405,18 @@ def plot(rows, path):
                 if not h:
                     continue
                 cycles, t, r = np.array(h).T
+                # The original's points are separate solves (max_iter = 1,
+                # 2, 4, ...), so its times carry their own noise.
+                marker = '.' if key == 'original' else None
                 axes_row[2 * k].semilogy(cycles, r, line, color=colour,
-                                         label=label, marker='.' if
-                                         key == 'original' else None)
+                                         label=label, marker=marker)
                 axes_row[2 * k + 1].semilogy(t, r, line, color=colour,
-                                             label=label)
+                                             label=label, marker=marker)
+            original = row[problem].get('original')
+            if original and not np.isfinite(original['residual']):
+                axes_row[2 * k].text(0.5, 0.9, 'gravomg 0.0.4 returns NaN',
+                                     transform=axes_row[2 * k].transAxes,
+                                     color='C3', ha='center', fontsize=8)
             for j, xlabel in enumerate(('iterations', 'seconds (new '
                                         'matrix, hierarchy excluded)')):
                 ax = axes_row[2 * k + j]

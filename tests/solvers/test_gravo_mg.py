@@ -236,3 +236,19 @@ def test_torch_bad_input():
         solver.solve(A, torch.full((A.shape[0], ), float('nan')))
     with pytest.raises(ValueError, match='shape'):
         solver.solve(A, torch.ones(A.shape[0], 2, 2))
+
+
+def test_divergence_is_an_error_not_nan():
+    # S + 1e-6 M in float32: rounding in the near-constant mode is
+    # amplified a million-fold by the coarse solve, and the cycles diverge
+    # (x80 per cycle on this sphere). float64 converges.
+    pos, face = sphere(5)
+    A, m = mesh_system(pos, face, alpha=1.0)
+    A = (A - sp.diags(m) + 1e-6 * sp.diags(m)).tocsr()  # S + 1e-6 M
+    solver = GravoMG.from_mesh(pos, face, lower_bound=100)
+    b = m * np.random.default_rng(10).normal(size=A.shape[0])
+    with pytest.raises(RuntimeError, match='diverge.*float64'):
+        solver.solve(A, torch.tensor(b, dtype=torch.float32))
+    x = solver.solve(A, torch.tensor(b))
+    assert solver.info.converged
+    assert relative_residual(A, x.numpy(), b) < 1e-4

@@ -350,15 +350,24 @@ def gravo_level(pos: np.ndarray, edge_index: np.ndarray, ratio: float = 8.0,
     is none, inverse distance weights to the three closest of that coarse
     point and its coarse neighbours, so rows are non-negative, sum to 1 and
     have at most 3 non-zeros."""
+    check_options(ratio, weighting, voronoi)
+    pos, edge_index = _check_graph(pos, edge_index)
+    return _coarsen(pos, *_csr(edge_index, pos.shape[0]), ratio, shift,
+                    weighting, voronoi)[0]
+
+
+def check_options(ratio, weighting: str, voronoi: str):
+    """Clear errors for a bad ratio, weighting or Voronoi mode."""
+    if not (isinstance(ratio, (int, float)) and math.isfinite(ratio)
+            and ratio > 1):
+        raise ValueError(f"'ratio' must be a number above 1 (the factor by "
+                         f"which each level shrinks), got {ratio!r}")
     if weighting not in WEIGHTINGS:
         raise ValueError(f"'weighting' must be one of {WEIGHTINGS}, got "
                          f"{weighting!r}")
     if voronoi not in VORONOI:
         raise ValueError(f"'voronoi' must be one of {VORONOI}, got "
                          f"{voronoi!r}")
-    pos, edge_index = _check_graph(pos, edge_index)
-    return _coarsen(pos, *_csr(edge_index, pos.shape[0]), ratio, shift,
-                    weighting, voronoi)[0]
 
 
 def _check_graph(pos, edge_index):
@@ -421,16 +430,7 @@ def gravo_hierarchy(pos: np.ndarray, edge_index: np.ndarray,
                     ) -> List[GravoLevel]:
     """Coarsens with :func:`gravo_level` while the next level would keep at
     least ``lower_bound`` points, at most ``max_levels`` times."""
-    if not (isinstance(ratio, (int, float)) and math.isfinite(ratio)
-            and ratio > 1):
-        raise ValueError(f"'ratio' must be a number above 1 (the factor by "
-                         f"which each level shrinks), got {ratio!r}")
-    if weighting not in WEIGHTINGS:
-        raise ValueError(f"'weighting' must be one of {WEIGHTINGS}, got "
-                         f"{weighting!r}")
-    if voronoi not in VORONOI:
-        raise ValueError(f"'voronoi' must be one of {VORONOI}, got "
-                         f"{voronoi!r}")
+    check_options(ratio, weighting, voronoi)
     pos, edge_index = _check_graph(pos, edge_index)
     graph = _csr(edge_index, pos.shape[0])
     levels = []

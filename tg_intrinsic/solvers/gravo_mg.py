@@ -332,6 +332,15 @@ class GravoMG:
             info.iterations += 1
             info.residuals.append(float((norms(residual(X)) / b_norm).max()))
             info.times.append(time.perf_counter() - start)
+            if not np.isfinite(info.residuals[-1]) or \
+                    info.residuals[-1] > 1e3 * max(info.residuals[0], 1.0):
+                raise RuntimeError(
+                    f"the cycles diverge (relative residual "
+                    f"{info.residuals[-1]:.3g} after {info.iterations} "
+                    f"cycles, {info.residuals[0]:.3g} after the first). "
+                    f"In float32 this happens for nearly singular systems "
+                    f"such as S + 1e-6 M, whose rounding errors the coarse "
+                    f"solve amplifies; solve in float64")
             if info.residuals[-1] < tol:
                 info.converged = True
                 break

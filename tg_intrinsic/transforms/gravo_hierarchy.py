@@ -7,7 +7,7 @@ from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry import knn
 from tg_intrinsic.geometry._checks import (check_edge_index, check_faces,
                                            check_points)
-from tg_intrinsic.geometry.gravo import VORONOI, WEIGHTINGS, gravo_hierarchy
+from tg_intrinsic.geometry.gravo import check_options, gravo_hierarchy
 
 
 @functional_transform('gravo_hierarchy')
@@ -68,20 +68,12 @@ class GravoHierarchy(BaseTransform):
                  max_levels: int = 10, shift: bool = True,
                  weighting: str = 'barycentric', voronoi: str = 'exact',
                  k: int = 8):
-        if not isinstance(ratio, (int, float)) or not ratio > 1:
-            raise ValueError(f"'ratio' must be a number above 1, got "
-                             f"{ratio!r}")
         for name, value in (('lower_bound', lower_bound),
                             ('max_levels', max_levels), ('k', k)):
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"'{name}' must be a positive integer, got "
                                  f"{value!r}")
-        if weighting not in WEIGHTINGS:
-            raise ValueError(f"'weighting' must be one of {WEIGHTINGS}, got "
-                             f"{weighting!r}")
-        if voronoi not in VORONOI:
-            raise ValueError(f"'voronoi' must be one of {VORONOI}, got "
-                             f"{voronoi!r}")
+        check_options(ratio, weighting, voronoi)
         self.ratio = float(ratio)
         self.lower_bound = lower_bound
         self.max_levels = max_levels

@@ -4,7 +4,6 @@ patch-based against global vector heat solves, and bad input."""
 import importlib.util
 import math
 
-import numpy as np
 import pytest
 import torch
 import trimesh

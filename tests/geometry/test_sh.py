@@ -1,0 +1,147 @@
+"""Real spherical harmonics against scipy's complex ones, orthonormality by
+exact quadrature, the stated sign convention, least-squares recovery of
+band-limited signals, rotation invariance of the power spectrum, gradients
+and bad input."""
+import math
+
+import numpy as np
+import pytest
+import torch
+from scipy.special import sph_harm_y
+from scipy.spatial.transform import Rotation
+
+from tg_intrinsic.geometry.sh import (fibonacci_sphere, fit_sh,
+                                      num_coefficients, power_spectrum,
+                                      real_sh, sh_index)
+
+L_MAX = 8
+
+
+def random_directions(n, seed=0):
+    d = torch.randn(n, 3, dtype=torch.float64,
+                    generator=torch.Generator().manual_seed(seed))
+    d = d / d.norm(dim=1, keepdim=True)
+    # the poles and the equator too
+    extra = torch.tensor([[0, 0, 1.0], [0, 0, -1.0], [1.0, 0, 0]],
+                         dtype=torch.float64)
+    return torch.cat([d, extra])
+
+
+def scipy_real_sh(d, l_max):
+    x, y, z = d.numpy().T
+    theta = np.arccos(np.clip(z, -1, 1))
+    phi = np.arctan2(y, x)
+    out = np.zeros((d.shape[0], num_coefficients(l_max)))
+    for l in range(l_max + 1):  # noqa: E741
+        for m in range(-l, l + 1):
+            Y = sph_harm_y(l, abs(m), theta, phi)
+            if m > 0:
+                value = math.sqrt(2) * Y.real
+            elif m < 0:
+                value = math.sqrt(2) * Y.imag
+            else:
+                value = Y.real
+            out[:, sh_index(l, m)] = value
+    return out
+
+
+def test_matches_scipy_real_form():
+    d = random_directions(500)
+    ours = real_sh(d, L_MAX).numpy()
+    assert np.abs(ours - scipy_real_sh(d, L_MAX)).max() < 1e-10
+
+
+def test_convention_and_shapes():
+    d = torch.tensor([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]],
+                     dtype=torch.float64)
+    Y = real_sh(d, 1)
+    c = math.sqrt(3 / (4 * math.pi))
+    assert torch.allclose(Y[:, sh_index(1, 1)], torch.tensor([-c, 0, 0],
+                                                             dtype=Y.dtype))
+    assert torch.allclose(Y[:, sh_index(1, -1)], torch.tensor([0, -c, 0],
+                                                              dtype=Y.dtype))
+    assert torch.allclose(Y[:, sh_index(1, 0)], torch.tensor([0, 0, c],
+                                                             dtype=Y.dtype))
+    assert torch.allclose(Y[:, 0], torch.full((3, ), 0.5 / math.sqrt(
+        math.pi), dtype=Y.dtype))
+    assert real_sh(torch.zeros(2, 5, 3), 3).shape == (2, 5, 16)
+
+
+def test_orthonormal_by_exact_quadrature():
+    # Gauss-Legendre in z times uniform azimuths integrates every product
+    # of two harmonics up to degree 8 exactly.
+    nodes, weights = np.polynomial.legendre.leggauss(12)
+    phi = np.arange(24) * 2 * np.pi / 24
+    z, p = np.meshgrid(nodes, phi, indexing='ij')
+    r = np.sqrt(1 - z ** 2)
+    d = torch.tensor(np.stack([r * np.cos(p), r * np.sin(p), z], -1)
+                     .reshape(-1, 3))
+    w = torch.tensor(np.repeat(weights, 24) * 2 * np.pi / 24)
+    Y = real_sh(d, L_MAX)
+    gram = (Y * w[:, None]).t() @ Y
+    assert torch.allclose(gram, torch.eye(gram.size(0), dtype=gram.dtype),
+                          atol=1e-12)
+
+
+def test_fit_recovers_band_limited_signals_batched():
+    rng = torch.Generator().manual_seed(1)
+    coefficients = torch.randn(3, num_coefficients(4), 2, dtype=torch.float64,
+                               generator=rng)
+    d = torch.stack([random_directions(60, seed=k) for k in range(3)])
+    values = torch.einsum('bsk,bkc->bsc', real_sh(d, 4), coefficients)
+    fitted = fit_sh(d, values, 4, regularizer=0.0)
+    assert torch.allclose(fitted, coefficients, atol=1e-10)
+    # per example equals batched; a tiny regulariser changes little
+    for b in range(3):
+        one = fit_sh(d[b], values[b], 4, regularizer=1e-10)
+        assert torch.allclose(one, coefficients[b], atol=1e-6)
+
+
+def test_regulariser_keeps_few_samples_solvable():
+    d = random_directions(5)[:5]
+    values = torch.ones(5, dtype=torch.float64)
+    c = fit_sh(d, values, 5, weights=torch.rand(5, dtype=torch.float64),
+               regularizer=1e-4)
+    assert c.shape == (36, ) and bool(torch.isfinite(c).all())
+
+
+def test_power_spectrum_is_rotation_invariant():
+    coefficients = torch.randn(num_coefficients(L_MAX), dtype=torch.float64,
+                               generator=torch.Generator().manual_seed(2))
+    d = fibonacci_sphere(2000)
+    R = torch.tensor(Rotation.random(random_state=3).as_matrix())
+    values = real_sh(d @ R.t(), L_MAX) @ coefficients  # f(R d)
+    rotated = fit_sh(d, values, L_MAX, regularizer=0.0)
+    assert not torch.allclose(rotated, coefficients, atol=1e-3)
+    assert torch.allclose(power_spectrum(rotated, L_MAX),
+                          power_spectrum(coefficients, L_MAX), rtol=1e-8)
+
+
+def test_gradients_and_fibonacci():
+    d = random_directions(4).requires_grad_(True)
+    assert torch.autograd.gradcheck(lambda x: real_sh(x, 3), (d, ))
+    f = fibonacci_sphere(1000)
+    assert torch.allclose(f.norm(dim=1), torch.ones(1000, dtype=f.dtype))
+    assert abs(float(f.mean(0).norm())) < 1e-3
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match='l_max'):
+        real_sh(torch.zeros(2, 3), -1)
+    with pytest.raises(ValueError, match='3 coordinates'):
+        real_sh(torch.zeros(2, 4), 2)
+    with pytest.raises(ValueError, match='float'):
+        real_sh(torch.zeros(2, 3, dtype=torch.long), 2)
+    d = random_directions(10)
+    with pytest.raises(ValueError, match='NaN'):
+        fit_sh(d, torch.full((d.size(0), ), float('nan'),
+                             dtype=torch.float64), 2)
+    with pytest.raises(ValueError, match='one sample per direction'):
+        fit_sh(d, torch.zeros(3, dtype=torch.float64), 2)
+    with pytest.raises(ValueError, match='non-negative'):
+        fit_sh(d, torch.zeros(d.size(0), dtype=torch.float64), 2,
+               weights=-torch.ones(d.size(0), dtype=torch.float64))
+    with pytest.raises(ValueError, match='expected 9'):
+        power_spectrum(torch.zeros(10), 2)
+    with pytest.raises(ValueError, match="'n'"):
+        fibonacci_sphere(0)

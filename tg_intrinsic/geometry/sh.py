@@ -1,0 +1,178 @@
+r"""Real spherical harmonics and their fitting to sparse samples, in torch
+(autograd, any device).
+
+Convention: real orthonormal harmonics built from the complex ones with the
+Condon-Shortley phase (as scipy's ``sph_harm_y``),
+
+.. math::
+    Y_{lm} = \begin{cases}
+      \sqrt{2}\,\operatorname{Re} Y_l^{m} & m > 0 \\
+      Y_l^0 & m = 0 \\
+      \sqrt{2}\,\operatorname{Im} Y_l^{|m|} & m < 0,
+    \end{cases}
+
+so that :math:`Y_{1,1} = -\sqrt{3/4\pi}\,x`, :math:`Y_{1,-1} =
+-\sqrt{3/4\pi}\,y` and :math:`Y_{1,0} = \sqrt{3/4\pi}\,z` for a unit
+direction :math:`(x, y, z)` (polar angle from :math:`+z`). Coefficient
+:math:`(l, m)` sits at index :math:`l (l + 1) + m`; degree :math:`l^*` has
+:math:`(l^* + 1)^2` of them.
+"""
+import math
+
+import torch
+from torch import Tensor
+
+from ._checks import check_tensor
+
+
+def num_coefficients(l_max: int) -> int:
+    """:math:`(l^* + 1)^2`, the harmonics up to degree ``l_max``."""
+    return (l_max + 1) ** 2
+
+
+def sh_index(l: int, m: int) -> int:  # noqa: E741
+    """Position of :math:`Y_{lm}` in the coefficient vector."""
+    return l * (l + 1) + m
+
+
+def _check_l_max(l_max) -> int:
+    if not isinstance(l_max, int) or l_max < 0:
+        raise ValueError(f"'l_max' must be a non-negative integer, got "
+                         f"{l_max!r}")
+    return l_max
+
+
+def real_sh(directions: Tensor, l_max: int) -> Tensor:
+    r"""The real orthonormal spherical harmonics :math:`Y_{lm}` up to degree
+    :obj:`l_max` at unit :obj:`directions` :math:`(\ldots, 3)`, as
+    :math:`(\ldots, (l^*+1)^2)`.
+
+    Computed as polynomials in :math:`x, y, z` (the Legendre recurrence
+    divided by :math:`\sin^m\theta`, times :math:`\operatorname{Re}/
+    \operatorname{Im} (x + i y)^m`), so there is no :math:`\arctan` and no
+    singularity at the poles, and gradients flow through the directions.
+    Directions are used as given; normalise them first."""
+    l_max = _check_l_max(l_max)
+    directions = check_tensor(directions, 'directions')
+    if directions.size(-1) != 3:
+        raise ValueError(f"'directions' must end in 3 coordinates, got "
+                         f"shape {list(directions.shape)}")
+    if not directions.is_floating_point():
+        raise ValueError("'directions' must be a float tensor")
+    x, y, z = directions.unbind(-1)
+    out = directions.new_empty(directions.shape[:-1]
+                               + (num_coefficients(l_max), ))
+    # cos(m phi) sin^m(theta) and sin(m phi) sin^m(theta) by recurrence
+    cos_m, sin_m = [torch.ones_like(x)], [torch.zeros_like(x)]
+    for m in range(1, l_max + 1):
+        c, s = cos_m[-1], sin_m[-1]
+        cos_m.append(x * c - y * s)
+        sin_m.append(x * s + y * c)
+    for m in range(l_max + 1):
+        # q_l = P_l^m(z) / sin^m(theta), Condon-Shortley phase included:
+        # q_m = (-1)^m (2m - 1)!!, q_{m+1} = (2m + 1) z q_m, then the
+        # three-term recurrence in l.
+        double_factorial = math.prod(range(1, 2 * m, 2))
+        q_prev, q = None, torch.full_like(z, (-1) ** m * double_factorial)
+        for l in range(m, l_max + 1):  # noqa: E741
+            if l == m + 1:
+                q_prev, q = q, (2 * m + 1) * z * q
+            elif l > m + 1:
+                q_prev, q = q, ((2 * l - 1) * z * q
+                                - (l + m - 1) * q_prev) / (l - m)
+            norm = math.sqrt((2 * l + 1) / (4 * math.pi)
+                             * math.factorial(l - m) / math.factorial(l + m))
+            if m == 0:
+                out[..., sh_index(l, 0)] = norm * q
+            else:
+                scaled = math.sqrt(2) * norm * q
+                out[..., sh_index(l, m)] = scaled * cos_m[m]
+                out[..., sh_index(l, -m)] = scaled * sin_m[m]
+    return out
+
+
+def fibonacci_sphere(n: int, dtype=torch.float64, device=None) -> Tensor:
+    r"""``n`` nearly uniform unit directions :math:`(n, 3)` on the
+    Fibonacci spiral: :math:`z_k = 1 - (2k + 1)/n`, azimuth :math:`k`
+    times the golden angle."""
+    if not isinstance(n, int) or n < 1:
+        raise ValueError(f"'n' must be a positive integer, got {n!r}")
+    k = torch.arange(n, dtype=dtype, device=device)
+    z = 1 - (2 * k + 1) / n
+    radius = torch.sqrt((1 - z * z).clamp_min(0))
+    phi = k * math.pi * (3 - math.sqrt(5))
+    return torch.stack([radius * torch.cos(phi), radius * torch.sin(phi), z],
+                       -1)
+
+
+def fit_sh(directions: Tensor, values: Tensor, l_max: int,
+           weights: Tensor = None, regularizer: float = 1e-4) -> Tensor:
+    r"""Regularised least-squares spherical-harmonic coefficients of sparse
+    samples, batched over leading dimensions,
+
+    .. math::
+        (Y^\top W Y + \lambda\,\operatorname{diag}(e^{l}))\,c = Y^\top W f,
+
+    with :math:`Y` the harmonics at the sample directions, :math:`W` the
+    sample :obj:`weights` (default 1; e.g. :math:`\max(0, \cos\theta)`) and
+    :math:`\lambda` the :obj:`regularizer`, which damps high degrees and
+    keeps the system solvable with fewer samples than coefficients.
+
+    Args:
+        directions (torch.Tensor): Unit directions :math:`(\ldots, S, 3)`.
+        values (torch.Tensor): Samples :math:`(\ldots, S)` or
+            :math:`(\ldots, S, C)` (channels).
+        l_max (int): Highest degree.
+        weights (torch.Tensor, optional): Non-negative sample weights
+            :math:`(\ldots, S)`. (default: :obj:`None`)
+        regularizer (float, optional): :math:`\lambda`.
+            (default: :obj:`1e-4`)
+
+    Returns:
+        Coefficients :math:`(\ldots, (l^*+1)^2)` or :math:`(\ldots,
+        (l^*+1)^2, C)`.
+    """
+    l_max = _check_l_max(l_max)
+    if not (regularizer >= 0 and math.isfinite(regularizer)):
+        raise ValueError(f"'regularizer' must be finite and >= 0, got "
+                         f"{regularizer!r}")
+    Y = real_sh(directions, l_max)  # (..., S, K)
+    squeeze = values.dim() == Y.dim() - 1
+    f = values.unsqueeze(-1) if squeeze else values
+    if f.shape[:-1] != Y.shape[:-1]:
+        raise ValueError(f"'values' must have one sample per direction: "
+                         f"directions {list(directions.shape)}, values "
+                         f"{list(values.shape)}")
+    if not bool(torch.isfinite(f).all()):
+        raise ValueError("'values' hold NaN or infinite samples; mask them "
+                         "with zero weights instead")
+    if weights is not None:
+        if weights.shape != Y.shape[:-1] or bool((weights < 0).any()):
+            raise ValueError("'weights' must be non-negative, one per "
+                             "sample")
+        Yw = Y * weights.unsqueeze(-1)
+    else:
+        Yw = Y
+    degree = torch.arange(l_max + 1, dtype=Y.dtype, device=Y.device)
+    degree = degree.repeat_interleave(2 * degree.long() + 1)
+    gram = Yw.transpose(-1, -2) @ Y
+    gram = gram + regularizer * torch.diag_embed(torch.exp(degree))
+    if regularizer == 0:
+        coefficients = torch.linalg.lstsq(gram, Yw.transpose(-1, -2) @ f
+                                          ).solution
+    else:
+        coefficients = torch.linalg.solve(gram, Yw.transpose(-1, -2) @ f)
+    return coefficients.squeeze(-1) if squeeze else coefficients
+
+
+def power_spectrum(coefficients: Tensor, l_max: int) -> Tensor:
+    r""":math:`S(l) = \sum_m c_{lm}^2` per degree: :math:`(\ldots,
+    (l^*+1)^2)` to :math:`(\ldots, l^* + 1)`; invariant under rotations."""
+    l_max = _check_l_max(l_max)
+    if coefficients.size(-1) != num_coefficients(l_max):
+        raise ValueError(f"expected {num_coefficients(l_max)} coefficients "
+                         f"for l_max={l_max}, got {coefficients.size(-1)}")
+    degree = torch.arange(l_max + 1, device=coefficients.device)
+    index = degree.repeat_interleave(2 * degree + 1)
+    out = coefficients.new_zeros(coefficients.shape[:-1] + (l_max + 1, ))
+    return out.index_add(-1, index, coefficients * coefficients)

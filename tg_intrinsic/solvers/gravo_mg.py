@@ -234,8 +234,9 @@ class GravoMG:
         torch backend on its device and dtype (float32 or float64), all
         :math:`K` columns at once: Chebyshev smoothing of degree
         :obj:`pre` / :obj:`post` preconditioned by the diagonal, sparse
-        CSR products and a dense Cholesky solve on the coarsest level. In
-        float32 the residual cannot drop much below :math:`10^{-6}`.
+        CSR products, and the coarsest level solved by the sparse LU on
+        the CPU. Cycles that diverge raise a RuntimeError (float32 does on
+        nearly singular systems such as :math:`S + 10^{-6} M`).
 
         Without a hierarchy (fewer points than its lower bound) the system
         is solved directly (on the CPU) and :attr:`info` says so. Returns

@@ -145,3 +145,36 @@ def test_bad_input():
         power_spectrum(torch.zeros(10), 2)
     with pytest.raises(ValueError, match="'n'"):
         fibonacci_sphere(0)
+
+
+def test_brdf_terms():
+    from tg_intrinsic.geometry.sh import (brdf_filter,
+                                          principled_to_torrance_sparrow,
+                                          schlick_fresnel, smith_g1)
+    alpha = torch.tensor([0.0, 0.1, 0.5], dtype=torch.float64)
+    f = brdf_filter(3, alpha)
+    assert f.shape == (3, 16)
+    assert torch.all(f[0] == 1) and torch.all(f[:, 0] == 1)
+    assert torch.isclose(f[2, sh_index(3, -2)], torch.tensor(
+        math.exp(-(0.5 * 3) ** 2), dtype=torch.float64))
+    # Schlick: R0 at normal incidence, 1 at grazing
+    r0 = torch.tensor(0.04, dtype=torch.float64)
+    cos = torch.linspace(0, 1, 11, dtype=torch.float64)
+    F = schlick_fresnel(cos, r0)
+    assert F[0] == 1 and torch.isclose(F[-1], r0) and (F.diff() < 0).all()
+    # Smith GGX against its Lambda form, 1 / (1 + Lambda) with
+    # Lambda = (sqrt(1 + alpha^2 tan^2) - 1) / 2
+    cos = torch.linspace(0.05, 1, 20, dtype=torch.float64)[:, None]
+    a = torch.tensor([0.05, 0.3, 0.9], dtype=torch.float64)
+    tan2 = (1 - cos ** 2) / cos ** 2
+    lam = (torch.sqrt(1 + a ** 2 * tan2) - 1) / 2
+    assert torch.allclose(smith_g1(cos, a), 1 / (1 + lam), atol=1e-12)
+    assert smith_g1(torch.tensor([0.0, -0.5]), torch.tensor(0.3)).eq(0).all()
+    # principled: dielectric keeps the colour as diffuse, metal as specular
+    base = torch.tensor([[0.8, 0.5, 0.2], [0.8, 0.5, 0.2]])
+    kd, r0, alpha = principled_to_torrance_sparrow(
+        base, torch.tensor([0.0, 1.0]), torch.tensor([0.5, 0.3]))
+    assert torch.allclose(kd[0], base[0]) and torch.all(kd[1] == 0)
+    assert torch.allclose(r0[0], torch.full((3, ), 0.04))
+    assert torch.allclose(r0[1], base[1])
+    assert torch.allclose(alpha, torch.tensor([0.25, 0.09]))

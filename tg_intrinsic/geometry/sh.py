@@ -176,3 +176,52 @@ def power_spectrum(coefficients: Tensor, l_max: int) -> Tensor:
     index = degree.repeat_interleave(2 * degree + 1)
     out = coefficients.new_zeros(coefficients.shape[:-1] + (l_max + 1, ))
     return out.index_add(-1, index, coefficients * coefficients)
+
+
+# ---------------------------------------------------------------- BRDF terms
+def brdf_filter(l_max: int, alpha: Tensor) -> Tensor:
+    r"""Spherical-harmonic attenuation of the Torrance-Sparrow lobe of
+    roughness :math:`\alpha`, :math:`e^{-(\alpha l)^2}` per coefficient:
+    :math:`(\ldots)` to :math:`(\ldots, (l^*+1)^2)` (Ramamoorthi and
+    Hanrahan's frequency-space approximation)."""
+    l_max = _check_l_max(l_max)
+    alpha = torch.as_tensor(alpha)
+    if not alpha.is_floating_point():
+        alpha = alpha.double()
+    degree = torch.arange(l_max + 1, dtype=alpha.dtype, device=alpha.device)
+    degree = degree.repeat_interleave(2 * degree.long() + 1)
+    return torch.exp(-(alpha.unsqueeze(-1) * degree) ** 2)
+
+
+def schlick_fresnel(cos_theta: Tensor, r0: Tensor) -> Tensor:
+    r"""Schlick's Fresnel :math:`F = R_0 + (1 - R_0)(1 - \cos\theta)^5`,
+    with :math:`\cos\theta` clamped to :math:`[0, 1]`."""
+    c = cos_theta.clamp(0.0, 1.0)
+    return r0 + (1 - r0) * (1 - c) ** 5
+
+
+def smith_g1(cos_theta: Tensor, alpha: Tensor) -> Tensor:
+    r"""Smith's GGX shadowing-masking term for one direction,
+
+    .. math::
+        G_1 = \frac{2 \cos\theta}{\cos\theta + \sqrt{\alpha^2 + (1 -
+        \alpha^2)\cos^2\theta}},
+
+    0 at grazing and below the horizon, 1 at normal incidence."""
+    c = cos_theta.clamp(0.0, 1.0)
+    root = torch.sqrt(alpha ** 2 + (1 - alpha ** 2) * c * c)
+    return torch.where(c > 0, 2 * c / (c + root).clamp_min(1e-30),
+                       torch.zeros_like(c + root))
+
+
+def principled_to_torrance_sparrow(base_color: Tensor, metallic: Tensor,
+                                   roughness: Tensor):
+    r"""Principled parameters to the Lambert + Torrance-Sparrow ones:
+    diffuse albedo :math:`K_d = b (1 - m)`, specular reflectance at normal
+    incidence :math:`R_0 = 0.04 + (b - 0.04) m` and lobe width
+    :math:`\alpha = r^2`, for base colour :math:`b` :math:`(\ldots, 3)`,
+    metallic :math:`m` and roughness :math:`r` :math:`(\ldots)`.
+    Returns ``(kd, r0, alpha)``."""
+    m = metallic.unsqueeze(-1)
+    return base_color * (1 - m), 0.04 + (base_color - 0.04) * m, \
+        roughness ** 2

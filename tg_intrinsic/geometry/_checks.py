@@ -100,6 +100,14 @@ def check_positive_int(value, name: str, minimum: int = 1) -> int:
     return value
 
 
+def check_choice(value, name: str, options) -> str:
+    """``value`` must be one of ``options``."""
+    if value not in options:
+        raise ValueError(f"'{name}' must be one of {tuple(options)}, got "
+                         f"{value!r}")
+    return value
+
+
 def check_positive_float(value, name: str, allow_zero: bool = False) -> float:
     try:
         value = float(value)

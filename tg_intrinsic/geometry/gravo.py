@@ -9,6 +9,7 @@ from typing import List, NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from ._checks import check_choice
 from .voronoi import _dijkstra_from
 
 WEIGHTINGS = ('barycentric', 'inverse_distance', 'uniform')
@@ -362,12 +363,8 @@ def check_options(ratio, weighting: str, voronoi: str):
             and ratio > 1):
         raise ValueError(f"'ratio' must be a number above 1 (the factor by "
                          f"which each level shrinks), got {ratio!r}")
-    if weighting not in WEIGHTINGS:
-        raise ValueError(f"'weighting' must be one of {WEIGHTINGS}, got "
-                         f"{weighting!r}")
-    if voronoi not in VORONOI:
-        raise ValueError(f"'voronoi' must be one of {VORONOI}, got "
-                         f"{voronoi!r}")
+    check_choice(weighting, 'weighting', WEIGHTINGS)
+    check_choice(voronoi, 'voronoi', VORONOI)
 
 
 def _check_graph(pos, edge_index):

@@ -8,6 +8,7 @@ import torch
 from pyamg.relaxation.relaxation import gauss_seidel
 from scipy.sparse.linalg import LinearOperator, splu
 
+from tg_intrinsic.geometry._checks import check_choice
 from tg_intrinsic.geometry.gravo import gravo_hierarchy
 from tg_intrinsic.solvers._kernels import (check_matrix, fingerprint,
                                            galerkin, matvec)
@@ -242,12 +243,8 @@ class GravoMG:
         is solved directly (on the CPU) and :attr:`info` says so. Returns
         :math:`x` of the type, shape, device and dtype of :obj:`b`;
         :attr:`info` holds a :class:`SolveInfo`."""
-        if cycle not in CYCLES:
-            raise ValueError(f"'cycle' must be one of {CYCLES}, got "
-                             f"{cycle!r}")
-        if criterion not in CRITERIA:
-            raise ValueError(f"'criterion' must be one of {CRITERIA}, got "
-                             f"{criterion!r}")
+        check_choice(cycle, 'cycle', CYCLES)
+        check_choice(criterion, 'criterion', CRITERIA)
         levels = self.setup(A)
         n = levels.A[0].shape[0]
         use_torch = isinstance(b, torch.Tensor)
@@ -363,6 +360,7 @@ class GravoMG:
         """One symmetric cycle from a zero guess, as a scipy
         :class:`~scipy.sparse.linalg.LinearOperator` for conjugate
         gradients (``scipy.sparse.linalg.cg(A, b, M=...)``)."""
+        check_choice(cycle, 'cycle', CYCLES)
         levels = self.setup(A)
         n = levels.A[0].shape[0]
 

@@ -6,7 +6,7 @@ from torch_geometric.transforms import BaseTransform
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry import knn
 from tg_intrinsic.geometry._checks import (check_edge_index, check_faces,
-                                           check_points)
+                                           check_points, check_positive_int)
 from tg_intrinsic.geometry.gravo import check_options, gravo_hierarchy
 
 
@@ -70,9 +70,7 @@ class GravoHierarchy(BaseTransform):
                  k: int = 8):
         for name, value in (('lower_bound', lower_bound),
                             ('max_levels', max_levels), ('k', k)):
-            if not isinstance(value, int) or value < 1:
-                raise ValueError(f"'{name}' must be a positive integer, got "
-                                 f"{value!r}")
+            check_positive_int(value, name)
         check_options(ratio, weighting, voronoi)
         self.ratio = float(ratio)
         self.lower_bound = lower_bound

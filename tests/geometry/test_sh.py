@@ -178,3 +178,27 @@ def test_brdf_terms():
     assert torch.allclose(r0[0], torch.full((3, ), 0.04))
     assert torch.allclose(r0[1], base[1])
     assert torch.allclose(alpha, torch.tensor([0.25, 0.09]))
+
+
+def test_principled_round_trip():
+    from tg_intrinsic.geometry.sh import (principled_to_torrance_sparrow,
+                                          torrance_sparrow_to_principled)
+    g = torch.Generator().manual_seed(3)
+    base = torch.rand(20000, 3, generator=g, dtype=torch.float64)
+    metallic = torch.rand(20000, generator=g, dtype=torch.float64)
+    metallic[:50], metallic[50:100] = 0.0, 1.0
+    roughness = torch.rand(20000, generator=g, dtype=torch.float64)
+    back = torrance_sparrow_to_principled(
+        *principled_to_torrance_sparrow(base, metallic, roughness))
+    for got, want in zip(back, (base, metallic, roughness)):
+        assert torch.allclose(got, want, atol=1e-10)
+    # one channel alone has two valid roots: a grey colour darker than
+    # 0.04 (1 - m) resolves to the less metallic reading, and both map back
+    grey = torch.full((1, 3), 0.01, dtype=torch.float64)
+    kd, r0, alpha = principled_to_torrance_sparrow(
+        grey, torch.tensor([0.2], dtype=torch.float64),
+        torch.tensor([0.5], dtype=torch.float64))
+    b, m, _ = torrance_sparrow_to_principled(kd, r0, alpha)
+    assert float(m) < 0.2 + 1e-12
+    kd2, r02, _ = principled_to_torrance_sparrow(b, m, alpha)
+    assert torch.allclose(kd2, kd) and torch.allclose(r02, r0)

@@ -225,3 +225,38 @@ def principled_to_torrance_sparrow(base_color: Tensor, metallic: Tensor,
     m = metallic.unsqueeze(-1)
     return base_color * (1 - m), 0.04 + (base_color - 0.04) * m, \
         roughness ** 2
+
+
+def torrance_sparrow_to_principled(kd: Tensor, r0: Tensor, alpha: Tensor):
+    r"""The inverse of :func:`principled_to_torrance_sparrow` with one
+    metallic value shared by the colour channels.
+
+    Per channel, :math:`K_d = b (1 - m)` and :math:`R_0 = 0.04 + (b - 0.04)
+    m` give :math:`b = K_d + R_0 - 0.04 (1 - m)` and, with :math:`s = 1 - m`,
+
+    .. math::
+        0.04 s^2 - (K_d + R_0) s + K_d = 0.
+
+    One channel alone is ambiguous (both roots are valid when :math:`b <
+    0.04 s`); the shared metallic decides: of the six roots of the three
+    channels, the :math:`s \in [0, 1]` with the smallest summed residual
+    over the channels is taken (a grey colour stays ambiguous; it resolves to
+    the less metallic reading). The base colour follows from it and the
+    roughness is :math:`\sqrt{\alpha}`; everything is clamped to
+    :math:`[0, 1]`. Exact for inputs made by
+    :func:`principled_to_torrance_sparrow`. Returns ``(base_color,
+    metallic, roughness)``."""
+    total = kd + r0
+    root = torch.sqrt((total * total - 0.16 * kd).clamp_min(0))
+    # The smaller root without cancellation.
+    small = 2 * kd / (total + root).clamp_min(1e-30)
+    candidates = torch.cat([(total + root) / 0.08, small], -1).clamp(0, 1)
+    s = candidates.unsqueeze(-1)  # (..., 6, 1) against channels (..., 1, 3)
+    # The tiny tilt makes rounding-level ties (grey, b < 0.04 s) resolve to
+    # the larger s, the less metallic reading.
+    residual = (0.04 * s * s - total.unsqueeze(-2) * s
+                + kd.unsqueeze(-2)).abs().sum(-1) - 1e-9 * candidates
+    s = candidates.gather(-1, residual.argmin(-1, keepdim=True))
+    metallic = (1 - s.squeeze(-1)).clamp(0, 1)
+    base_color = (total - 0.04 * s).clamp(0, 1)
+    return base_color, metallic, alpha.clamp(0, 1).sqrt()

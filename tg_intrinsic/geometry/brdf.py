@@ -1,0 +1,203 @@
+r"""Reflection in the spherical-harmonic domain and the power-spectrum
+uncertainty of Wiersma et al., "Uncertainty for SVBRDF Acquisition using
+Frequency Analysis" (SIGGRAPH 2025), after Ramamoorthi and Hanrahan's
+signal-processing view of inverse rendering (2001).
+
+Directions are in a point's local frame (rows :math:`e_u, e_v, n` of
+``frame``), so :math:`z = \cos\theta`. Outgoing radiance is parameterised by
+the mirror direction :math:`r = 2 (n \cdot \omega_o) n - \omega_o`, in which
+the specular lobe is a convolution of the incoming light with a kernel of
+SH attenuation :math:`e^{-(\alpha l)^2}`.
+"""
+import math
+
+import torch
+from torch import Tensor
+
+from .sh import num_coefficients, power_spectrum, schlick_fresnel, smith_g1
+
+#: Smallest GGX width used by the model, as the original (roughness 0.03).
+MIN_ALPHA = 1e-3
+
+
+def reflect(directions: Tensor, normals: Tensor) -> Tensor:
+    r"""Mirror directions :math:`2 (n \cdot \omega) n - \omega`."""
+    return 2 * (directions * normals).sum(-1, keepdim=True) * normals \
+        - directions
+
+
+def to_local(vectors: Tensor, frame: Tensor) -> Tensor:
+    r"""World vectors :math:`(N, \ldots, 3)` in the frames :math:`(N, 3, 3)`
+    (rows :math:`e_u, e_v, n`) of their points."""
+    shape = vectors.shape
+    flat = vectors.reshape(shape[0], -1, 3)
+    return (flat @ frame.transpose(1, 2)).reshape(shape)
+
+
+def degrees(l_max: int, dtype=torch.float64, device=None) -> Tensor:
+    """The degree :math:`l` of every coefficient, :math:`((l^*+1)^2)`."""
+    l = torch.arange(l_max + 1, dtype=dtype, device=device)  # noqa: E741
+    return l.repeat_interleave(2 * l.long() + 1)
+
+
+def lobe_filter(l_max: int, alpha: Tensor, prefilter_alpha: float = 0.0
+                ) -> Tensor:
+    r"""SH attenuation of the specular lobe for light that was already
+    band-limited by a filter of width :math:`\alpha'`,
+    :math:`e^{-(\alpha^2 - \alpha'^2) l^2}`: :math:`(\ldots)` to
+    :math:`(\ldots, (l^*+1)^2)`. With :math:`\alpha'=0` it is
+    :func:`~tg_intrinsic.geometry.sh.brdf_filter`."""
+    l = degrees(l_max, alpha.dtype, alpha.device)  # noqa: E741
+    return torch.exp(-(alpha.unsqueeze(-1) ** 2 - prefilter_alpha ** 2) * l * l)
+
+
+def sh_reflectance(sh_in: Tensor, irradiance: Tensor, basis_out: Tensor,
+                   cos_out: Tensor, base_color: Tensor, metallic: Tensor,
+                   roughness: Tensor, prefilter_alpha: float = 0.0,
+                   fresnel: bool = True, masking: bool = True) -> Tensor:
+    r"""Outgoing radiance of the principled BRDF under light given in
+    spherical harmonics (thesis eq. 5.11),
+
+    .. math::
+        B(\omega_o) = \frac{K_d}{\pi} E + F(\theta_o)\, G_\alpha(\theta_o)
+        \sum_{lm} e^{-(\alpha^2 - \alpha'^2) l^2} L_{lm}\, Y_{lm}(r),
+
+    with :math:`K_d = b (1 - m)`, Schlick's :math:`F` of :math:`R_0 = 0.04 +
+    (b - 0.04) m`, Smith's GGX masking :math:`G_\alpha`, :math:`\alpha =
+    r^2` (at least :data:`MIN_ALPHA`), and :math:`L_{lm}` the incoming
+    light (with shadowing :math:`G_\alpha(\theta_i)` applied by the caller
+    if wanted) band-limited by :math:`\alpha'`.
+
+    Args:
+        sh_in (torch.Tensor): Incoming SH per point :math:`(N, K, 3)`.
+        irradiance (torch.Tensor): :math:`E` per point :math:`(N, 3)`.
+        basis_out (torch.Tensor): Harmonics at the mirror directions
+            :math:`(N, V, K)`.
+        cos_out (torch.Tensor): :math:`\cos\theta_o` :math:`(N, V)`.
+        base_color, metallic, roughness (torch.Tensor): :math:`(N, 3)`,
+            :math:`(N)`, :math:`(N)`.
+        prefilter_alpha (float, optional): :math:`\alpha'`.
+            (default: :obj:`0.0`)
+        fresnel (bool, optional): Apply :math:`F(\theta_o)`, else
+            :math:`R_0`. (default: :obj:`True`)
+        masking (bool, optional): Apply :math:`G_\alpha(\theta_o)`.
+            (default: :obj:`True`)
+
+    Returns:
+        :math:`(N, V, 3)`.
+    """
+    l_max = int(round(math.sqrt(sh_in.size(1)))) - 1
+    alpha = (roughness * roughness).clamp_min(MIN_ALPHA)
+    coefficients = sh_in * lobe_filter(l_max, alpha, prefilter_alpha
+                                       ).unsqueeze(-1)
+    specular = basis_out @ coefficients  # (N, V, 3)
+    r0 = (0.04 + (base_color - 0.04) * metallic.unsqueeze(-1)).unsqueeze(1)
+    if fresnel:
+        specular = specular * schlick_fresnel(cos_out.unsqueeze(-1), r0)
+    else:
+        specular = specular * r0
+    if masking:
+        specular = specular * smith_g1(cos_out, alpha.unsqueeze(-1)
+                                       ).unsqueeze(-1)
+    diffuse = base_color * (1 - metallic.unsqueeze(-1)) * irradiance / math.pi
+    return diffuse.unsqueeze(1) + specular
+
+
+def spectral_grid(num_specular: int, num_roughness: int, dtype=torch.float64,
+                  device=None):
+    r"""The search grid: :math:`K_s` and roughness :math:`r` evenly in
+    :math:`[0, 1]` (so :math:`\alpha = r^2` is denser at low roughness)."""
+    return (torch.linspace(0, 1, num_specular, dtype=dtype, device=device),
+            torch.linspace(0, 1, num_roughness, dtype=dtype, device=device))
+
+
+def spectral_uncertainty(spectrum_in: Tensor, spectrum_out: Tensor,
+                         grid=(32, 32), sigma: float = 1e-2,
+                         prefilter_alpha: float = 0.0,
+                         chunk_size: int = 16384):
+    r"""Likelihood of the specular parameters given the power spectra of
+    incoming and outgoing light, and its normalised entropy (eqs. 5.19 and
+    5.25).
+
+    Per channel, with both spectra divided by the light's band-limited
+    power :math:`\sum_{l \leq l^*} S_L(l)`, so that the distance depends
+    neither on the radiance scale nor on the light's mean (a Dirac light
+    with a clear lobe then has entropy about 0.25, as in the paper's
+    Figure 5.4),
+
+    .. math::
+        D(K_s, \alpha) = \sum_{l \geq 1} \left(S_B(l) - K_s^2
+        e^{-2(\alpha^2 - \alpha'^2) l^2} S_L(l)\right)^2, \qquad
+        d \propto e^{-D / (2\sigma^2)}, \qquad
+        H = -\frac{\sum d \log d}{\log n}.
+
+    The channel with the lowest entropy is reported (the most decisive
+    one); its grid argmax gives :math:`\alpha`, and every channel's
+    :math:`K_s` is its argmin of :math:`D` at that :math:`\alpha`. A point
+    whose light is black in every channel, or that was never observed
+    (zero spectra), has a flat likelihood: entropy 1.
+
+    Args:
+        spectrum_in (torch.Tensor): :math:`S_L(l)` :math:`(N, l^*+1, C)`.
+        spectrum_out (torch.Tensor): :math:`S_B(l)` :math:`(N, l^*+1, C)`.
+        grid (tuple, optional): Grid cells ``(specular, roughness)``.
+            (default: :obj:`(32, 32)`)
+        sigma (float, optional): :math:`\sigma`. (default: :obj:`1e-2`)
+        prefilter_alpha (float, optional): :math:`\alpha'` of the light.
+            (default: :obj:`0.0`)
+        chunk_size (int, optional): Points per chunk (bounds the memory
+            to about ``chunk_size * C * cells`` numbers).
+            (default: :obj:`16384`)
+
+    Returns:
+        ``(entropy (N), likelihood (N, grid[0], grid[1]), roughness (N),
+        specular (N, C))``.
+    """
+    num_ks, num_r = grid
+    ks, roughness = spectral_grid(num_ks, num_r, spectrum_in.dtype,
+                                  spectrum_in.device)
+    l = torch.arange(1, spectrum_in.size(1), dtype=spectrum_in.dtype,
+                     device=spectrum_in.device)  # noqa: E741
+    alpha = roughness ** 2
+    # (num_r, L): the squared lobe, e^{-2 (alpha^2 - alpha'^2) l^2}
+    lobe = torch.exp(-2 * (alpha[:, None] ** 2 - prefilter_alpha ** 2)
+                     * l * l)
+    ks2 = (ks * ks)[:, None]
+    out = ([], [], [], [])
+    for start in range(0, spectrum_in.size(0), chunk_size):
+        s_in = spectrum_in[start:start + chunk_size]
+        s_out = spectrum_out[start:start + chunk_size]
+        scale = s_in.sum(1, keepdim=True).clamp_min(1e-30)
+        s_in = (s_in[:, 1:] / scale).transpose(1, 2)  # (n, C, L)
+        s_out = (s_out[:, 1:] / scale).transpose(1, 2)
+        # D = sum B^2 - 2 ks^2 sum B f L + ks^4 sum f^2 L^2, expanded so
+        # the grid costs two small matrix products.
+        cross = (s_out * s_in) @ lobe.t()  # (n, C, num_r)
+        square = (s_in * s_in) @ (lobe * lobe).t()
+        const = (s_out * s_out).sum(-1, keepdim=True)
+        distance = (const.unsqueeze(-1) - 2 * ks2 * cross.unsqueeze(-2)
+                    + ks2 * ks2 * square.unsqueeze(-2)).clamp_min(0)
+        log_like = -distance / (2 * sigma * sigma)
+        log_p = log_like - torch.logsumexp(log_like, (-2, -1), keepdim=True)
+        p = log_p.exp()
+        entropy = -(p * log_p).sum((-2, -1)) / math.log(num_ks * num_r)
+        best = entropy.argmin(-1)  # (n,)
+        rows = torch.arange(best.numel(), device=best.device)
+        p_best = p[rows, best]  # (n, num_ks, num_r)
+        r_index = p_best.amax(-2).argmax(-1)
+        ks_index = distance[rows, :, :, r_index].argmin(-1)  # (n, C)
+        out[0].append(entropy[rows, best].clamp(0, 1))
+        out[1].append(p_best)
+        out[2].append(roughness[r_index])
+        out[3].append(ks[ks_index])
+    return tuple(torch.cat(o) for o in out)
+
+
+def observed_spectra(sh_in: Tensor, sh_out: Tensor):
+    """Power spectra of incoming and outgoing SH :math:`(N, K, C)` as
+    :math:`(N, l^*+1, C)`."""
+    l_max = int(round(math.sqrt(sh_in.size(1)))) - 1
+    assert num_coefficients(l_max) == sh_in.size(1)
+    return (power_spectrum(sh_in.transpose(1, 2), l_max).transpose(1, 2),
+            power_spectrum(sh_out.transpose(1, 2), l_max).transpose(1, 2))
+

@@ -1,0 +1,127 @@
+r"""Pinhole cameras: projection, a splatted depth test and image sampling.
+
+Convention (OpenCV): ``intrinsics`` :math:`K` :math:`(V, 3, 3)` and
+``extrinsics`` :math:`[R \mid t]` :math:`(V, 3, 4)` map a world point to
+camera coordinates :math:`x_c = R x + t`; the camera looks along
+:math:`+z_c` with :math:`x_c` right and :math:`y_c` down, and
+:math:`(u, v) = (f_x x_c / z_c + c_x, f_y y_c / z_c + c_y)`. The pixel in
+row :math:`i`, column :math:`j` covers :math:`u \in [j, j + 1)`,
+:math:`v \in [i, i + 1)`. The camera centre is :math:`-R^\top t`.
+"""
+import math
+
+import torch
+from torch import Tensor
+
+from ._checks import check_tensor
+
+
+def check_cameras(intrinsics, extrinsics, like: Tensor) -> int:
+    """Checks camera arrays and returns the number of views."""
+    intrinsics = check_tensor(intrinsics, 'intrinsics')
+    extrinsics = check_tensor(extrinsics, 'extrinsics')
+    if intrinsics.dim() != 3 or tuple(intrinsics.shape[1:]) != (3, 3):
+        raise ValueError(f"'intrinsics' must have shape [V, 3, 3] (one pinhole "
+                         f"matrix K per view), got {list(intrinsics.shape)}")
+    if extrinsics.dim() != 3 or tuple(extrinsics.shape[1:]) != (3, 4):
+        raise ValueError(f"'extrinsics' must have shape [V, 3, 4] (world-to-"
+                         f"camera [R | t] per view), got "
+                         f"{list(extrinsics.shape)}")
+    if intrinsics.size(0) != extrinsics.size(0):
+        raise ValueError(f"'intrinsics' has {intrinsics.size(0)} views but "
+                         f"'extrinsics' has {extrinsics.size(0)}")
+    for name, value in (('intrinsics', intrinsics),
+                        ('extrinsics', extrinsics)):
+        if not value.is_floating_point() or not bool(
+                torch.isfinite(value).all()):
+            raise ValueError(f"'{name}' must be finite floating-point "
+                             f"matrices")
+        if value.device != like.device:
+            raise ValueError(f"'{name}' is on {value.device} but the points "
+                             f"are on {like.device}; move both to one device")
+    focal = intrinsics[:, [0, 1], [0, 1]]
+    if bool((focal <= 0).any()):
+        raise ValueError("'intrinsics' must have positive focal lengths "
+                         "K[0, 0] and K[1, 1]")
+    rotation = extrinsics[:, :, :3].double()
+    eye = torch.eye(3, dtype=torch.float64, device=like.device)
+    if not bool(torch.allclose(rotation @ rotation.transpose(1, 2),
+                               eye.expand_as(rotation), atol=1e-4)):
+        raise ValueError("'extrinsics' must hold rotations in [:, :, :3] "
+                         "(orthonormal R of x_cam = R x + t)")
+    return intrinsics.size(0)
+
+
+def camera_centers(extrinsics: Tensor) -> Tensor:
+    r"""World positions :math:`-R^\top t` of the cameras, :math:`(V, 3)`."""
+    rotation, translation = extrinsics[:, :, :3], extrinsics[:, :, 3:]
+    return -(rotation.transpose(1, 2) @ translation).squeeze(-1)
+
+
+def project(pos: Tensor, intrinsics: Tensor, extrinsics: Tensor):
+    r"""Pixel coordinates :math:`(V, N, 2)` (as :math:`(u, v)`) and depths
+    :math:`z_c` :math:`(V, N)` of world points :math:`(N, 3)`."""
+    cam = pos.unsqueeze(0) @ extrinsics[:, :, :3].transpose(1, 2) \
+        + extrinsics[:, None, :, 3]
+    depth = cam[..., 2]
+    safe = torch.where(depth.abs() > 0, depth, torch.ones_like(depth))
+    uv = cam[..., :2] / safe.unsqueeze(-1)
+    uv = uv * intrinsics[:, None, [0, 1], [0, 1]] + intrinsics[:, None, [0, 1],
+                                                               [2, 2]]
+    return uv, depth
+
+
+def splat_depth(uv: Tensor, depth: Tensor, valid: Tensor, radius: Tensor,
+                height: int, width: int) -> Tensor:
+    r"""A depth buffer :math:`(V, H, W)` made by splatting every valid point
+    as a square of :obj:`radius` pixels :math:`(V, N)` (integers) around its
+    pixel, keeping the nearest depth; empty pixels are :math:`+\infty`.
+    Vectorised over views and points (one ``scatter_reduce`` per stencil
+    offset), so it runs on any device."""
+    num_views = uv.size(0)
+    buffer = torch.full((num_views, height * width), math.inf,
+                        dtype=depth.dtype, device=depth.device)
+    col = uv[..., 0].floor().long()
+    row = uv[..., 1].floor().long()
+    view = torch.arange(num_views, device=uv.device)[:, None]
+    reach = int(radius[valid].max()) if bool(valid.any()) else 0
+    for dy in range(-reach, reach + 1):
+        for dx in range(-reach, reach + 1):
+            r, c = row + dy, col + dx
+            keep = valid & (radius >= max(abs(dx), abs(dy))) & (r >= 0) \
+                & (r < height) & (c >= 0) & (c < width)
+            index = (view * (height * width) + r * width + c)[keep]
+            buffer.view(-1).scatter_reduce_(0, index, depth[keep], 'amin')
+    return buffer.view(num_views, height, width)
+
+
+def sample_images(images: Tensor, uv: Tensor):
+    r"""Bilinear samples of :obj:`images` :math:`(V, H, W, C)` at pixel
+    coordinates :math:`(V, N, 2)` (pixel centres at integers + 0.5,
+    clamped to the border): :math:`(V, N, C)`, and whether any of the four
+    taps is NaN :math:`(V, N)`."""
+    num_views, height, width, channels = images.shape
+    x = (uv[..., 0] - 0.5).clamp(0, width - 1)
+    y = (uv[..., 1] - 0.5).clamp(0, height - 1)
+    x0 = x.floor().clamp(max=max(width - 2, 0))
+    y0 = y.floor().clamp(max=max(height - 2, 0))
+    fx, fy = (x - x0).unsqueeze(-1), (y - y0).unsqueeze(-1)
+    x0, y0 = x0.long(), y0.long()
+    x1 = (x0 + 1).clamp(max=width - 1)
+    y1 = (y0 + 1).clamp(max=height - 1)
+    flat = images.reshape(num_views, height * width, channels)
+
+    def tap(r, c):
+        index = (r * width + c).unsqueeze(-1).expand(-1, -1, channels)
+        return flat.gather(1, index)
+
+    taps = (tap(y0, x0), tap(y0, x1), tap(y1, x0), tap(y1, x1))
+    weights = ((1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy)
+    nan = torch.zeros(uv.shape[:2], dtype=torch.bool, device=uv.device)
+    value = torch.zeros(uv.shape[:2] + (channels, ), dtype=images.dtype,
+                        device=images.device)
+    for t, w in zip(taps, weights):
+        bad = torch.isnan(t)
+        nan |= bad.any(-1)
+        value = value + torch.where(bad, torch.zeros_like(t), t) * w
+    return value, nan

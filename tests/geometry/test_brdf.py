@@ -188,3 +188,23 @@ def test_large_batch_is_chunked_and_dtype_stable(dtype):
     chunked = spectral_uncertainty(*spectra, chunk_size=7)
     for x, y in zip(whole, chunked):
         assert x.dtype == dtype and torch.allclose(x, y, atol=1e-6)
+
+
+def test_compiled_grid_matches_the_torch_grid(monkeypatch):
+    """The CPU kernel and the broadcast path (used on GPUs) agree."""
+    import tg_intrinsic.geometry.brdf as brdf
+    g = torch.Generator().manual_seed(8)
+    light = dirac_light(unit(torch.randn(200, 3, generator=g,
+                                         dtype=torch.float64))) \
+        + 0.3 * torch.randn(200, 36, 3, generator=g, dtype=torch.float64)
+    roughness = torch.rand(200, generator=g, dtype=torch.float64)
+    outgoing = torch.rand(200, 1, 3, generator=g, dtype=torch.float64) \
+        * lobe_filter(L_MAX, roughness ** 2).unsqueeze(-1) * light
+    spectra = observed_spectra(light, outgoing)
+    compiled = spectral_uncertainty(*spectra, grid=(16, 24), sigma=0.05,
+                                    prefilter_alpha=0.05)
+    monkeypatch.setattr(brdf, '_grid_cpu', brdf._grid_torch)
+    broadcast = spectral_uncertainty(*spectra, grid=(16, 24), sigma=0.05,
+                                     prefilter_alpha=0.05)
+    for x, y in zip(compiled, broadcast):
+        assert x.shape == y.shape and torch.allclose(x, y, atol=1e-10)

@@ -11,6 +11,8 @@ SH attenuation :math:`e^{-(\alpha l)^2}`.
 """
 import math
 
+import numba
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -162,35 +164,133 @@ def spectral_uncertainty(spectrum_in: Tensor, spectrum_out: Tensor,
     # (num_r, L): the squared lobe, e^{-2 (alpha^2 - alpha'^2) l^2}
     lobe = torch.exp(-2 * (alpha[:, None] ** 2 - prefilter_alpha ** 2)
                      * l * l)
-    ks2 = (ks * ks)[:, None]
+    ks2 = ks * ks
+    scale = 1 / (2 * sigma * sigma)
     out = ([], [], [], [])
     for start in range(0, spectrum_in.size(0), chunk_size):
         s_in = spectrum_in[start:start + chunk_size]
         s_out = spectrum_out[start:start + chunk_size]
-        scale = s_in.sum(1, keepdim=True).clamp_min(1e-30)
-        s_in = (s_in[:, 1:] / scale).transpose(1, 2)  # (n, C, L)
-        s_out = (s_out[:, 1:] / scale).transpose(1, 2)
+        power = s_in.sum(1, keepdim=True).clamp_min(1e-30)
+        s_in = (s_in[:, 1:] / power).transpose(1, 2)  # (n, C, L)
+        s_out = (s_out[:, 1:] / power).transpose(1, 2)
         # D = sum B^2 - 2 ks^2 sum B f L + ks^4 sum f^2 L^2, expanded so
         # the grid costs two small matrix products.
         cross = (s_out * s_in) @ lobe.t()  # (n, C, num_r)
         square = (s_in * s_in) @ (lobe * lobe).t()
-        const = (s_out * s_out).sum(-1, keepdim=True)
-        distance = (const.unsqueeze(-1) - 2 * ks2 * cross.unsqueeze(-2)
-                    + ks2 * ks2 * square.unsqueeze(-2)).clamp_min(0)
-        log_like = -distance / (2 * sigma * sigma)
-        log_p = log_like - torch.logsumexp(log_like, (-2, -1), keepdim=True)
-        p = log_p.exp()
-        entropy = -(p * log_p).sum((-2, -1)) / math.log(num_ks * num_r)
-        best = entropy.argmin(-1)  # (n,)
-        rows = torch.arange(best.numel(), device=best.device)
-        p_best = p[rows, best]  # (n, num_ks, num_r)
-        r_index = p_best.amax(-2).argmax(-1)
-        ks_index = distance[rows, :, :, r_index].argmin(-1)  # (n, C)
-        out[0].append(entropy[rows, best].clamp(0, 1))
+        const = (s_out * s_out).sum(-1)  # (n, C)
+        if cross.device.type == 'cpu':
+            result = _grid_cpu(cross, square, const, ks2, scale)
+        else:
+            result = _grid_torch(cross, square, const, ks2, scale)
+        entropy, p_best, r_index, ks_index = result
+        out[0].append(entropy)
         out[1].append(p_best)
         out[2].append(roughness[r_index])
         out[3].append(ks[ks_index])
     return tuple(torch.cat(o) for o in out)
+
+
+def _grid_torch(cross, square, const, ks2, scale):
+    """The grid on any device, with broadcasting."""
+    num_ks, num_r = ks2.numel(), cross.size(-1)
+    u = ks2[:, None]
+    distance = (const[..., None, None] - 2 * u * cross.unsqueeze(-2)
+                + u * u * square.unsqueeze(-2)).clamp_min(0)
+    log_like = -distance * scale
+    log_p = log_like - torch.logsumexp(log_like, (-2, -1), keepdim=True)
+    p = log_p.exp()
+    entropy = -(p * log_p).sum((-2, -1)) / math.log(num_ks * num_r)
+    best = entropy.argmin(-1)  # (n,)
+    rows = torch.arange(best.numel(), device=best.device)
+    p_best = p[rows, best]  # (n, num_ks, num_r)
+    r_index = p_best.amax(-2).argmax(-1)
+    ks_index = distance[rows, :, :, r_index].argmin(-1)  # (n, C)
+    return entropy[rows, best].clamp(0, 1), p_best, r_index, ks_index
+
+
+def _grid_cpu(cross, square, const, ks2, scale):
+    """The grid on the CPU: one compiled pass per point and channel, the
+    exponentials computed once, nothing of size points x channels x grid
+    allocated but the answer."""
+    n, channels, num_r = cross.shape
+    num_ks = ks2.numel()
+    entropy = np.empty(n)
+    p_best = np.empty((n, num_ks, num_r))
+    r_index = np.empty(n, dtype=np.int64)
+    ks_index = np.empty((n, channels), dtype=np.int64)
+    # float64 inside whatever the input, so float32 input picks the same
+    # cells as float64 input would
+    _grid_kernel(*(t.double().contiguous().numpy() for t in (
+        cross, square, const, ks2)), float(scale), entropy, p_best, r_index,
+        ks_index)
+    dtype = cross.dtype
+    return (torch.from_numpy(entropy).to(dtype),
+            torch.from_numpy(p_best).to(dtype), torch.from_numpy(r_index),
+            torch.from_numpy(ks_index))
+
+
+_NEGLIGIBLE = 50.0
+
+
+@numba.njit(parallel=True, fastmath=True, cache=True)
+def _grid_kernel(cross, square, const, ks2, scale, entropy, p_best, r_index,
+                 ks_index):  # pragma: no cover (numba)
+    n, channels, num_r = cross.shape
+    num_ks = ks2.size
+    log_cells = np.log(num_ks * num_r)
+    for i in numba.prange(n):
+        best_h = np.inf
+        best_c = 0
+        best_min = 0.0
+        best_z = 1.0
+        for c in range(channels):
+            d_min = np.inf
+            for k in range(num_ks):
+                u = ks2[k]
+                for a in range(num_r):
+                    d = max(const[i, c] - 2 * u * cross[i, c, a]
+                            + u * u * square[i, c, a], 0.0)
+                    d_min = min(d_min, d)
+            z = 0.0
+            s = 0.0
+            for k in range(num_ks):
+                u = ks2[k]
+                for a in range(num_r):
+                    d = max(const[i, c] - 2 * u * cross[i, c, a]
+                            + u * u * square[i, c, a], 0.0)
+                    x = (d - d_min) * scale
+                    if x < _NEGLIGIBLE:  # e^{-x} below 1e-22 adds nothing
+                        e = np.exp(-x)
+                        z += e
+                        s += e * x
+            # -sum p log p with p = e^{-x} / z is log z + sum e x / z
+            h = (np.log(z) + s / z) / log_cells
+            if h < best_h:
+                best_h, best_c, best_min, best_z = h, c, d_min, z
+        entropy[i] = min(max(best_h, 0.0), 1.0)
+        c = best_c
+        best_p = -1.0
+        best_a = 0
+        for k in range(num_ks):
+            u = ks2[k]
+            for a in range(num_r):
+                d = max(const[i, c] - 2 * u * cross[i, c, a]
+                        + u * u * square[i, c, a], 0.0)
+                x = (d - best_min) * scale
+                p = np.exp(-x) / best_z if x < _NEGLIGIBLE else 0.0
+                p_best[i, k, a] = p
+                if p > best_p:
+                    best_p, best_a = p, a
+        r_index[i] = best_a
+        for c in range(channels):
+            d_best = np.inf
+            for k in range(num_ks):
+                u = ks2[k]
+                d = max(const[i, c] - 2 * u * cross[i, c, best_a]
+                        + u * u * square[i, c, best_a], 0.0)
+                if d < d_best:
+                    d_best = d
+                    ks_index[i, c] = k
 
 
 def observed_spectra(sh_in: Tensor, sh_out: Tensor):

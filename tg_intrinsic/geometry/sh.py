@@ -68,24 +68,29 @@ def real_sh(directions: Tensor, l_max: int) -> Tensor:
         c, s = cos_m[-1], sin_m[-1]
         cos_m.append(x * c - y * s)
         sin_m.append(x * s + y * c)
+    # q_lm = N_lm P_l^m(z) / sin^m(theta), normalised as it goes (no
+    # factorials, so any degree fits in float32): q_mm from q_{m-1,m-1},
+    # q_{m+1,m} = sqrt(2m + 3) z q_mm, then the three-term recurrence with
+    # a_lm = sqrt((4 l^2 - 1) / (l^2 - m^2)). Condon-Shortley phase in q_mm.
+    diagonal = math.sqrt(1 / (4 * math.pi))
     for m in range(l_max + 1):
-        # q_l = P_l^m(z) / sin^m(theta), Condon-Shortley phase included:
-        # q_m = (-1)^m (2m - 1)!!, q_{m+1} = (2m + 1) z q_m, then the
-        # three-term recurrence in l.
-        double_factorial = math.prod(range(1, 2 * m, 2))
-        q_prev, q = None, torch.full_like(z, (-1) ** m * double_factorial)
+        if m > 0:
+            diagonal *= -math.sqrt((2 * m + 1) / (2 * m))
+        q_prev, q = None, torch.full_like(z, diagonal)
+        a_prev = 0.0
         for l in range(m, l_max + 1):  # noqa: E741
             if l == m + 1:
-                q_prev, q = q, (2 * m + 1) * z * q
+                a = math.sqrt(2 * m + 3)
+                q_prev, q = q, a * z * q
+                a_prev = a
             elif l > m + 1:
-                q_prev, q = q, ((2 * l - 1) * z * q
-                                - (l + m - 1) * q_prev) / (l - m)
-            norm = math.sqrt((2 * l + 1) / (4 * math.pi)
-                             * math.factorial(l - m) / math.factorial(l + m))
+                a = math.sqrt((4 * l * l - 1) / (l * l - m * m))
+                q_prev, q = q, a * (z * q - q_prev / a_prev)
+                a_prev = a
             if m == 0:
-                out[..., sh_index(l, 0)] = norm * q
+                out[..., sh_index(l, 0)] = q
             else:
-                scaled = math.sqrt(2) * norm * q
+                scaled = math.sqrt(2) * q
                 out[..., sh_index(l, m)] = scaled * cos_m[m]
                 out[..., sh_index(l, -m)] = scaled * sin_m[m]
     return out

@@ -38,3 +38,38 @@ def grid_mesh(n=6, jitter=0.0, seed=0, dtype=torch.float64):
 @pytest.fixture
 def sphere_mesh():
     return icosphere(3)
+
+
+def sky_envmap(height=32, width=64, sun=(0.4, -0.3, 0.866), sun_width=0.08,
+               dtype=torch.float64):
+    """A small HDR sky: a blue gradient, a dim ground and a Gaussian sun."""
+    from tg_intrinsic.geometry.envmap import equirect_directions
+    d = equirect_directions(height, width, dtype)
+    z = d[..., 2:3]
+    sky = torch.tensor([0.3, 0.5, 0.9], dtype=dtype) * (0.4 + 0.6 * z.clamp(0))
+    ground = torch.tensor([0.15, 0.12, 0.1], dtype=dtype).expand_as(sky)
+    env = torch.where(z > 0, sky, ground)
+    s = torch.tensor(sun, dtype=dtype)
+    s = s / s.norm()
+    angle = torch.acos((d @ s).clamp(-1, 1)).unsqueeze(-1)
+    sun_rgb = torch.tensor([30.0, 27.0, 22.0], dtype=dtype)
+    return env + sun_rgb * torch.exp(-(angle / sun_width) ** 2)
+
+
+def svbrdf_observation_geometry(num_points=200, num_views=40, seed=0,
+                                dtype=torch.float64):
+    """Sphere points with normals, camera directions around them and the
+    facing mask: the inputs FitSphericalHarmonics reads, radiance zero."""
+    from torch_geometric.data import Data
+    from tg_intrinsic.geometry.sh import fibonacci_sphere
+    pos = fibonacci_sphere(num_points, dtype=dtype)
+    g = torch.Generator().manual_seed(seed)
+    cams = 3 * fibonacci_sphere(num_views, dtype=dtype)
+    cams = cams + 0.05 * torch.randn(num_views, 3, generator=g, dtype=dtype)
+    to_cam = cams[None] - pos[:, None]
+    obs_dir = to_cam / to_cam.norm(dim=-1, keepdim=True)
+    mask = (obs_dir * pos[:, None]).sum(-1) > 0.05
+    return Data(pos=pos, normal=pos.clone(), obs_dir=obs_dir, obs_mask=mask,
+                obs_radiance=torch.zeros(num_points, num_views, 3,
+                                         dtype=dtype),
+                envmap=sky_envmap(dtype=dtype))

@@ -89,7 +89,10 @@ def sh_reflectance(sh_in: Tensor, irradiance: Tensor, basis_out: Tensor,
         :math:`(N, V, 3)`.
     """
     l_max = int(round(math.sqrt(sh_in.size(1)))) - 1
-    alpha = (roughness * roughness).clamp_min(MIN_ALPHA)
+    alpha = roughness * roughness
+    # the floor keeps the gradient of r^2: a hard clamp would zero it and
+    # strand a fit that touches the floor there for good
+    alpha = alpha + (MIN_ALPHA - alpha).clamp_min(0).detach()
     coefficients = sh_in * lobe_filter(l_max, alpha, prefilter_alpha
                                        ).unsqueeze(-1)
     specular = basis_out @ coefficients  # (N, V, 3)

@@ -1,5 +1,6 @@
 r"""Layers: :class:`DeltaConv`, :class:`HarmonicConv` and their vector and
-complex building blocks."""
+complex building blocks, and the frequency-domain SVBRDF model
+:class:`FrequencySVBRDF`."""
 from .vector_linear import VectorLinear
 from .vector_nonlin import VectorNonLin
 from .vector_mlp import VectorMLP
@@ -9,8 +10,10 @@ from .complex_linear import ComplexLinear
 from .complex_batch_norm import ComplexBatchNorm
 from .harmonic_conv import HarmonicConv
 from .harmonic_resnet_block import HarmonicResNetBlock
+from .frequency_svbrdf import FrequencySVBRDF
+from .svbrdf_result import SVBRDFResult
 from . import models
 
 __all__ = ['VectorLinear', 'VectorNonLin', 'VectorMLP', 'DeltaConv',
            'ComplexReLU', 'ComplexLinear', 'ComplexBatchNorm', 'HarmonicConv',
-           'HarmonicResNetBlock', 'models']
+           'HarmonicResNetBlock', 'FrequencySVBRDF', 'SVBRDFResult', 'models']

@@ -10,7 +10,11 @@ from .parallel_transport import ParallelTransport
 from .multiscale_supports import MultiscaleSupports
 from .harmonic_precompute import HarmonicPrecompute
 from .gravo_hierarchy import GravoHierarchy
+from .project_views import ProjectViews
+from .fit_spherical_harmonics import FitSphericalHarmonics
+from .spectral_uncertainty import SpectralUncertainty
 
 __all__ = ['EstimateNormals', 'TangentFrames', 'MLSOperators',
            'RandomRotation', 'NormalizeArea', 'LogMap', 'ParallelTransport',
-           'MultiscaleSupports', 'HarmonicPrecompute', 'GravoHierarchy']
+           'MultiscaleSupports', 'HarmonicPrecompute', 'GravoHierarchy', 'ProjectViews',
+           'FitSphericalHarmonics', 'SpectralUncertainty']

@@ -1,0 +1,271 @@
+import math
+import time
+
+import torch
+from torch import Tensor
+from torch.nn import Parameter
+from torch_geometric.data import Data
+
+from tg_intrinsic.geometry import knn, mesh_edges
+from tg_intrinsic.geometry.brdf import MIN_ALPHA, sh_reflectance
+from tg_intrinsic.geometry.sh import real_sh, smith_g1
+from tg_intrinsic.geometry._checks import (check_positive_float,
+                                           check_positive_int)
+from tg_intrinsic.nn.svbrdf_result import SVBRDFResult
+
+_NEEDED = ('sh_in', 'light_radiance', 'mirror_dir', 'irradiance',
+           'obs_radiance', 'obs_mask', 'sh_prefilter')
+
+
+class FrequencySVBRDF(torch.nn.Module):
+    r"""Per-point principled SVBRDF parameters with the differentiable
+    spherical-harmonic reflection model of Wiersma et al., "Uncertainty for
+    SVBRDF Acquisition using Frequency Analysis" (SIGGRAPH 2025, eq. 5.11),
+
+    .. math::
+        B(p, \omega_o) = \frac{K_d}{\pi} E(p) + F(\theta_o)\,
+        G_\alpha(\theta_o) \sum_{lm} e^{-(\alpha^2 - \alpha'^2) l^2}
+        [G_\alpha(\theta_i) L]_{lm}\, Y_{lm}(r),
+
+    with base colour :math:`b`, metallic :math:`m` and roughness
+    :math:`\rho` held as parameters (:math:`K_d = b(1 - m)`, :math:`R_0 =
+    0.04 + (b - 0.04) m`, :math:`\alpha = \rho^2`), Schlick's :math:`F`,
+    Smith's GGX :math:`G_\alpha` as masking (every step) and as shadowing
+    of the incoming light (refitted every few steps), and :math:`r` the
+    mirror direction of :math:`\omega_o`. :meth:`fit` runs the "mixed"
+    recovery: gradient descent on the cosine-weighted L1 distance to all
+    observations at once, optionally started from the spectrum grid search
+    of :class:`~tg_intrinsic.transforms.SpectralUncertainty`, with an
+    optional total-variation term over the surface graph.
+
+    Args:
+        num_points (int): Points (or texels) :math:`N`.
+        texture_shape (tuple, optional): ``(H, W)`` when the points are the
+            texels of a texture (exports then write texture images).
+            (default: :obj:`None`)
+        fresnel (bool, optional): Schlick's Fresnel on the specular term.
+            (default: :obj:`True`)
+        masking (bool, optional): :math:`G_\alpha(\theta_o)`.
+            (default: :obj:`True`)
+        shadowing (bool, optional): :math:`G_\alpha(\theta_i)` on the light.
+            (default: :obj:`True`)
+
+    Shapes:
+        - **input:** a :class:`~torch_geometric.data.Data` prepared by
+          :class:`~tg_intrinsic.transforms.ProjectViews` and
+          :class:`~tg_intrinsic.transforms.FitSphericalHarmonics`
+        - **output:** predicted radiance :math:`(N, V, 3)`
+    """
+    def __init__(self, num_points: int, texture_shape=None,
+                 fresnel: bool = True, masking: bool = True,
+                 shadowing: bool = True):
+        super().__init__()
+        self.num_points = check_positive_int(num_points, 'num_points')
+        if texture_shape is not None:
+            texture_shape = tuple(int(s) for s in texture_shape)
+            if len(texture_shape) != 2 or math.prod(texture_shape) \
+                    != num_points:
+                raise ValueError(f"'texture_shape' must be (H, W) with H * W "
+                                 f"= num_points = {num_points}, got "
+                                 f"{texture_shape}")
+        self.texture_shape = texture_shape
+        self.fresnel, self.masking, self.shadowing = fresnel, masking, \
+            shadowing
+        self.base_color = Parameter(torch.empty(num_points, 3))
+        self.metallic = Parameter(torch.empty(num_points))
+        self.roughness = Parameter(torch.empty(num_points))
+        self.reset_parameters()
+
+    def reset_parameters(self):
+        """Grey, half metallic, half rough: the original's start."""
+        with torch.no_grad():
+            for p in self.parameters():
+                p.fill_(0.5)
+
+    @torch.no_grad()
+    def initialize(self, data: Data):
+        """Starts from the argmax of the spectrum grid search
+        (``init_base_color``, ``init_metallic``, ``init_roughness``)."""
+        for name in ('base_color', 'metallic', 'roughness'):
+            value = getattr(data, f'init_{name}', None)
+            if value is None:
+                raise ValueError(f"'data.init_{name}' is missing; run "
+                                 f"SpectralUncertainty first")
+            getattr(self, name).copy_(value)
+        self.clamp_()
+
+    @torch.no_grad()
+    def clamp_(self):
+        """Projects the parameters back onto :math:`[0, 1]`, the roughness
+        onto :math:`[\sqrt{\alpha_{min}}, 1]`: at 0 the gradient of
+        :math:`\alpha = r^2` vanishes and a fit that got there would stay."""
+        self.base_color.clamp_(0, 1)
+        self.metallic.clamp_(0, 1)
+        self.roughness.clamp_(math.sqrt(MIN_ALPHA), 1)
+
+    def shadowed_light(self, data: Data) -> Tensor:
+        r"""The incoming SH of :math:`G_\alpha(\theta_i) L` with the current
+        roughness (no gradient: refitted every few steps, as the
+        original)."""
+        from tg_intrinsic.transforms.fit_spherical_harmonics import (
+            light_directions, light_fit_matrix)
+        light = data.light_radiance
+        l_max = int(round(math.sqrt(data.sh_in.size(1)))) - 1
+        local = light_directions(light.size(1), light.dtype, light.device)
+        regularizer = float(data.sh_regularizer.reshape(-1)[0]) if getattr(
+            data, 'sh_regularizer', None) is not None else 1e-4
+        fit = light_fit_matrix(local, l_max, regularizer)
+        alpha = (self.roughness.detach().to(light.dtype) ** 2
+                 ).clamp_min(MIN_ALPHA)
+        shadow = smith_g1(local[:, 2].unsqueeze(0), alpha.unsqueeze(-1))
+        return fit @ (shadow.unsqueeze(-1) * light)
+
+    def forward(self, data: Data, sh_in: Tensor = None,
+                basis: Tensor = None) -> Tensor:
+        """Predicted radiance at every observation :math:`(N, V, 3)`.
+        ``sh_in`` (default ``data.sh_in``) and ``basis`` (harmonics at the
+        mirror directions) may be passed precomputed."""
+        self._check(data)
+        if sh_in is None:
+            sh_in = data.sh_in
+        l_max = int(round(math.sqrt(sh_in.size(1)))) - 1
+        if basis is None:
+            basis = real_sh(data.mirror_dir, l_max)
+        dtype = sh_in.dtype
+        return sh_reflectance(
+            sh_in, data.irradiance.to(dtype), basis.to(dtype),
+            data.mirror_dir[..., 2].to(dtype), self.base_color.to(dtype),
+            self.metallic.to(dtype), self.roughness.to(dtype),
+            float(data.sh_prefilter.reshape(-1)[0]), self.fresnel,
+            self.masking)
+
+    def fit(self, data: Data, steps: int = 200, lr: float = 0.01,
+            init: str = 'spectrum', shadowing_every: int = 50,
+            tv_weight: float = 0.0, tv_k: int = 8,
+            progress: bool = True) -> SVBRDFResult:
+        r"""Recovers the parameters from the observations.
+
+        Args:
+            data (Data): Prepared by ``ProjectViews`` and
+                ``FitSphericalHarmonics`` (and ``SpectralUncertainty``,
+                which is run here when :obj:`init` needs it and it is
+                missing).
+            steps (int, optional): Adam steps; 0 returns the
+                initialisation (the "spectrum-only" recovery with
+                :obj:`init='spectrum'`). (default: :obj:`200`)
+            lr (float, optional): Adam learning rate. (default: :obj:`0.01`)
+            init (str, optional): :obj:`'spectrum'` (grid-search argmax) or
+                :obj:`'constant'` (0.5 everywhere). (default:
+                :obj:`'spectrum'`)
+            shadowing_every (int, optional): Steps between shadowing refits.
+                (default: :obj:`50`)
+            tv_weight (float, optional): Weight of the total variation
+                :math:`\frac{1}{|E|}\sum_{(i,j)} |x_i - x_j|` over mesh edges
+                (or a :obj:`tv_k`-nearest-neighbour graph). (default:
+                :obj:`0.0`)
+            tv_k (int, optional): Neighbours of that graph for point
+                clouds. (default: :obj:`8`)
+            progress (bool, optional): Show a progress bar.
+                (default: :obj:`True`)
+
+        Returns:
+            :class:`~tg_intrinsic.nn.svbrdf_result.SVBRDFResult`.
+        """
+        from tqdm.auto import tqdm
+        steps = check_positive_int(steps, 'steps', minimum=0)
+        lr = check_positive_float(lr, 'lr')
+        shadowing_every = check_positive_int(shadowing_every,
+                                             'shadowing_every')
+        tv_weight = check_positive_float(tv_weight, 'tv_weight',
+                                         allow_zero=True)
+        if init not in ('spectrum', 'constant'):
+            raise ValueError(f"'init' must be 'spectrum' or 'constant', got "
+                             f"{init!r}")
+        self._check(data)
+        observed = data.obs_radiance[data.obs_mask.bool()]
+        if not bool(torch.isfinite(observed).all()):
+            raise ValueError("'data.obs_radiance' holds NaN or infinite "
+                             "radiance at observed entries; mask them out "
+                             "in 'obs_mask' (ProjectViews does so for NaN "
+                             "pixels)")
+        start = time.perf_counter()
+        if getattr(data, 'init_roughness', None) is None \
+                or getattr(data, 'entropy', None) is None:
+            from tg_intrinsic.transforms.spectral_uncertainty import \
+                SpectralUncertainty
+            data = SpectralUncertainty(store_likelihood=False)(data)
+        if init == 'spectrum':
+            self.initialize(data)
+        else:
+            self.reset_parameters()
+        device = data.sh_in.device
+        self.to(device)
+        mask = data.obs_mask.bool()
+        weight = (data.mirror_dir[..., 2].clamp_min(0) * mask).unsqueeze(-1)
+        target = torch.where(mask.unsqueeze(-1), data.obs_radiance,
+                             torch.zeros_like(data.obs_radiance))
+        target = target.to(data.sh_in.dtype)
+        normaliser = 3 * weight.sum().clamp_min(1e-30)
+        l_max = int(round(math.sqrt(data.sh_in.size(1)))) - 1
+        basis = real_sh(data.mirror_dir, l_max)
+        edges = self._graph(data, tv_k) if tv_weight > 0 else None
+        optimizer = torch.optim.Adam(self.parameters(), lr=lr)
+        history = []
+        sh_in = data.sh_in
+        for step in tqdm(range(steps), disable=not progress,
+                         desc='FrequencySVBRDF'):
+            if self.shadowing and step % shadowing_every == 0:
+                sh_in = self.shadowed_light(data)
+            loss = (weight * (self(data, sh_in, basis) - target).abs()
+                    ).sum() / normaliser
+            if edges is not None:
+                loss = loss + tv_weight * self.total_variation(edges)
+            if not bool(torch.isfinite(loss)):
+                raise RuntimeError(f"the loss became {float(loss)} at step "
+                                   f"{step}; check the observations for "
+                                   f"NaN/inf radiance or lower 'lr'")
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+            self.clamp_()
+            history.append(float(loss.detach()))
+        with torch.no_grad():
+            final = float((weight * (self(data, sh_in, basis) - target).abs()
+                           ).sum() / normaliser)
+        return SVBRDFResult(
+            base_color=self.base_color.detach().clone(),
+            metallic=self.metallic.detach().clone(),
+            roughness=self.roughness.detach().clone(),
+            entropy=getattr(data, 'entropy', None),
+            loss=history + [final], seconds=time.perf_counter() - start,
+            texture_shape=self.texture_shape)
+
+    def total_variation(self, edges: Tensor) -> Tensor:
+        """Mean absolute difference of all parameters across edges."""
+        i, j = edges
+        tv = (self.base_color[i] - self.base_color[j]).abs().sum(-1)
+        tv = tv + (self.metallic[i] - self.metallic[j]).abs()
+        tv = tv + (self.roughness[i] - self.roughness[j]).abs()
+        return tv.mean()
+
+    @staticmethod
+    def _graph(data: Data, k: int) -> Tensor:
+        face = getattr(data, 'face', None)
+        if face is not None:
+            return mesh_edges(face, data.pos.size(0))
+        return knn(data.pos, k)
+
+    def _check(self, data: Data):
+        for key in _NEEDED:
+            if getattr(data, key, None) is None:
+                raise ValueError(f"'data.{key}' is missing; prepare the data "
+                                 f"with ProjectViews and "
+                                 f"FitSphericalHarmonics")
+        if data.sh_in.size(0) != self.num_points:
+            raise ValueError(f"the model holds {self.num_points} points but "
+                             f"the data has {data.sh_in.size(0)}")
+
+    def __repr__(self) -> str:
+        return (f'{self.__class__.__name__}({self.num_points}, '
+                f'texture_shape={self.texture_shape}, fresnel={self.fresnel}, '
+                f'masking={self.masking}, shadowing={self.shadowing})')

@@ -1,0 +1,190 @@
+import math
+
+import torch
+from torch_geometric.data import Data
+from torch_geometric.data.datapipes import functional_transform
+from torch_geometric.transforms import BaseTransform
+
+from tg_intrinsic.geometry import tangent_frames
+from tg_intrinsic.geometry._checks import (check_points,
+                                           check_positive_float,
+                                           check_positive_int, check_vectors)
+from tg_intrinsic.geometry.brdf import reflect, to_local
+from tg_intrinsic.geometry.envmap import check_envmap, equirect_lookup
+from tg_intrinsic.geometry.frames import check_frames
+from tg_intrinsic.geometry.sh import (fibonacci_sphere, fit_sh,
+                                      num_coefficients, real_sh)
+
+
+def light_directions(num_samples: int, dtype=torch.float64, device=None):
+    """The local sample directions of the incoming light (a Fibonacci
+    sphere), shared by every point."""
+    return fibonacci_sphere(num_samples, dtype=dtype, device=device)
+
+
+def light_fit_matrix(directions, l_max: int, regularizer: float):
+    r"""The regularised least-squares operator :math:`(Y^\top Y + \lambda
+    \operatorname{diag}(e^l))^{-1} Y^\top`, :math:`(K, S)`, for light
+    samples at the same local directions at every point (so one solve
+    serves all points)."""
+    Y = real_sh(directions, l_max)
+    l = torch.arange(l_max + 1, dtype=Y.dtype, device=Y.device)  # noqa: E741
+    l = l.repeat_interleave(2 * l.long() + 1)
+    gram = Y.t() @ Y + regularizer * torch.diag(l.exp())
+    return torch.linalg.solve(gram, Y.t())
+
+
+def light_below_horizon_removed(light_radiance, directions):
+    """Zeroes the light from below the tangent plane: it cannot reach the
+    surface, and a fit that left that half free would make it up."""
+    return light_radiance * (directions[:, 2] > 0).to(
+        light_radiance.dtype).unsqueeze(-1)
+
+
+@functional_transform('fit_spherical_harmonics')
+class FitSphericalHarmonics(BaseTransform):
+    r"""Fits spherical harmonics to the incoming and the observed outgoing
+    radiance of every point, in its local frame (Wiersma et al.,
+    "Uncertainty for SVBRDF Acquisition using Frequency Analysis",
+    SIGGRAPH 2025, eq. 5.12; functional name:
+    :obj:`fit_spherical_harmonics`).
+
+    Coefficients solve, per point and channel,
+
+    .. math::
+        (Y^\top W Y + \lambda \operatorname{diag}(e^{l}))\, c = Y^\top W f,
+        \qquad W = \operatorname{diag}(\max(0, \cos\theta)),
+
+    where the regulariser :math:`\lambda > 0` keeps points with fewer
+    samples than coefficients solvable (a point seen by no view gets zero
+    outgoing coefficients). The environment is first band-limited by a
+    spherical Gaussian of width :math:`\alpha' = V^{-1/2}` (:math:`V` views),
+    so that the light holds no frequencies the sparse views cannot resolve;
+    the lobe model undoes it with :math:`e^{-(\alpha^2 - \alpha'^2)l^2}`.
+
+    Writes ``frame`` (if absent), ``sh_in`` (the light that reaches the
+    surface: samples at :obj:`num_light_samples` Fibonacci directions of the
+    local frame, zero below the horizon, fitted over the whole sphere so
+    the lobe convolution sees no made-up light from below),
+    ``light_radiance`` (those samples, for the shadowing refit),
+    ``sh_out`` (the observations as a function of their mirror direction
+    :math:`r = 2(n \cdot \omega_o)n - \omega_o`), ``sh_in_obs`` (the light
+    sampled at the same mirror directions with the same weights, so that
+    its spectrum compares like with like against ``sh_out``), ``mirror_dir``
+    (:math:`r` in the local frame), ``irradiance`` :math:`E(n) = \int L
+    \max(0, n \cdot \omega)\, d\omega` of the unfiltered map, and
+    ``sh_prefilter`` (:math:`\alpha'`) and ``sh_regularizer``.
+
+    Args:
+        l_max (int, optional): Highest degree :math:`l^*`. (default: :obj:`5`)
+        regularizer (float, optional): :math:`\lambda`. (default: :obj:`1e-4`)
+        num_light_samples (int, optional): Light samples per point; by
+            default :math:`4 (l^* + 1)^2`. (default: :obj:`None`)
+        prefilter_alpha (float, optional): :math:`\alpha'`; by default
+            :math:`V^{-1/2}`; 0 switches the band limit off.
+            (default: :obj:`None`)
+
+    Shapes:
+        - **input:** ``normal`` :math:`(N, 3)`, ``envmap`` :math:`(H, W, 3)`,
+          ``obs_radiance`` :math:`(N, V, 3)`, ``obs_dir`` :math:`(N, V, 3)`,
+          ``obs_mask`` :math:`(N, V)` (from
+          :class:`~tg_intrinsic.transforms.ProjectViews`)
+        - **output:** ``sh_in``, ``sh_out``, ``sh_in_obs`` :math:`(N, K, 3)`
+          with :math:`K = (l^*+1)^2`, ``light_radiance`` :math:`(N, S, 3)`,
+          ``mirror_dir`` :math:`(N, V, 3)`, ``irradiance`` :math:`(N, 3)`,
+          ``frame`` :math:`(N, 3, 3)`, ``sh_prefilter`` and ``sh_regularizer``
+          :math:`(1)`
+    """
+    def __init__(self, l_max: int = 5, regularizer: float = 1e-4,
+                 num_light_samples: int = None,
+                 prefilter_alpha: float = None):
+        self.l_max = check_positive_int(l_max, 'l_max')
+        self.regularizer = check_positive_float(regularizer, 'regularizer')
+        if num_light_samples is None:
+            num_light_samples = 4 * num_coefficients(l_max)
+        self.num_light_samples = check_positive_int(num_light_samples,
+                                                    'num_light_samples')
+        if num_coefficients(l_max) > num_light_samples:
+            raise ValueError(f"'num_light_samples' must be at least the "
+                             f"{num_coefficients(l_max)} coefficients, got "
+                             f"{num_light_samples}")
+        if prefilter_alpha is not None:
+            prefilter_alpha = check_positive_float(prefilter_alpha,
+                                                   'prefilter_alpha',
+                                                   allow_zero=True)
+        self.prefilter_alpha = prefilter_alpha
+
+    def forward(self, data: Data) -> Data:
+        from tg_intrinsic.geometry.envmap import filter_envmap, irradiance
+        pos = check_points(data.pos, 'pos')
+        normal = getattr(data, 'normal', None)
+        if normal is None:
+            raise ValueError("FitSphericalHarmonics needs 'data.normal'; "
+                             "estimate it with EstimateNormals")
+        normal = check_vectors(normal, 'normal', pos.size(0), pos)
+        normal = normal / normal.norm(dim=-1, keepdim=True).clamp_min(1e-30)
+        envmap = getattr(data, 'envmap', None)
+        if envmap is None:
+            raise ValueError("FitSphericalHarmonics needs the lighting as "
+                             "'data.envmap' [H, W, 3] (equirectangular, "
+                             "z up; see tg_intrinsic.geometry.envmap)")
+        envmap = check_envmap(envmap).to(pos.device, pos.dtype)
+        for key in ('obs_radiance', 'obs_dir', 'obs_mask'):
+            if getattr(data, key, None) is None:
+                raise ValueError(f"FitSphericalHarmonics needs 'data.{key}'; "
+                                 f"run ProjectViews first")
+        radiance, view, mask = data.obs_radiance, data.obs_dir, data.obs_mask
+        num, num_views = mask.shape
+        if radiance.shape != (num, num_views, 3) or view.shape != (
+                num, num_views, 3) or num != pos.size(0):
+            raise ValueError(f"observations must be obs_radiance and obs_dir "
+                             f"[N, V, 3] and obs_mask [N, V] with N = "
+                             f"{pos.size(0)}, got {list(radiance.shape)}, "
+                             f"{list(view.shape)}, {list(mask.shape)}")
+        frame = getattr(data, 'frame', None)
+        frame = tangent_frames(normal) if frame is None else check_frames(
+            frame, num, pos)
+
+        prefilter = self.prefilter_alpha
+        if prefilter is None:
+            prefilter = 1 / math.sqrt(num_views)
+        light = filter_envmap(envmap, prefilter) if prefilter > 0 else envmap
+
+        # Incoming light at Fibonacci directions of every local frame.
+        local = light_directions(self.num_light_samples, pos.dtype,
+                                 pos.device)
+        light_radiance = equirect_lookup(light, local @ frame)  # (N, S, 3)
+        fit = light_fit_matrix(local, self.l_max, self.regularizer)
+        sh_in = fit @ light_below_horizon_removed(light_radiance, local)
+
+        # Outgoing radiance as a function of the mirror direction.
+        mask = mask.bool()
+        mirror = reflect(view, normal.unsqueeze(1))
+        mirror_local = to_local(mirror, frame)
+        weights = mirror_local[..., 2].clamp_min(0) * mask
+        values = torch.where(mask.unsqueeze(-1), radiance.to(pos.dtype),
+                             torch.zeros_like(radiance, dtype=pos.dtype))
+        sh_out = fit_sh(mirror_local, values, self.l_max, weights,
+                        self.regularizer)
+        sh_in_obs = fit_sh(mirror_local, equirect_lookup(light, mirror),
+                           self.l_max, weights, self.regularizer)
+
+        data = data.clone()
+        data.frame = frame
+        data.sh_in = sh_in
+        data.sh_out = sh_out
+        data.sh_in_obs = sh_in_obs
+        data.light_radiance = light_radiance
+        data.mirror_dir = mirror_local
+        data.irradiance = irradiance(envmap, normal)
+        data.sh_prefilter = torch.tensor([prefilter], dtype=pos.dtype,
+                                         device=pos.device)
+        data.sh_regularizer = torch.tensor([self.regularizer],
+                                           dtype=pos.dtype, device=pos.device)
+        return data
+
+    def __repr__(self) -> str:
+        return (f'{self.__class__.__name__}(l_max={self.l_max}, '
+                f'regularizer={self.regularizer}, num_light_samples='
+                f'{self.num_light_samples}, prefilter_alpha='
+                f'{self.prefilter_alpha})')

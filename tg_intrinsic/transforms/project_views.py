@@ -1,0 +1,201 @@
+import math
+import warnings
+
+import torch
+from torch_geometric.data import Data
+from torch_geometric.data.datapipes import functional_transform
+from torch_geometric.transforms import BaseTransform
+
+from tg_intrinsic.geometry import knn
+from tg_intrinsic.geometry._checks import (check_points,
+                                           check_positive_float,
+                                           check_tensor, check_vectors)
+from tg_intrinsic.geometry.cameras import (camera_centers, check_cameras,
+                                           project, sample_images,
+                                           splat_depth)
+
+
+@functional_transform('project_views')
+class ProjectViews(BaseTransform):
+    r"""Gathers, for every surface point, the radiance it shows in a set of
+    calibrated HDR photographs (functional name: :obj:`project_views`), the
+    input of frequency-domain SVBRDF recovery (Wiersma et al., SIGGRAPH
+    2025).
+
+    A point :math:`p` is observed by view :math:`v` when it projects inside
+    the image, lies in front of the camera, faces it
+    (:math:`n \cdot \omega_o > \cos\theta_{\max}`, when normals are given)
+    and passes a depth test,
+
+    .. math::
+        z_v(p) \leq \min_{q \text{ splatted on } \pi_v(p)} z_v(q) +
+        \tau\, \rho,
+
+    where the depth buffer is made by splatting every point over a square
+    of 0.75 times its nearest-neighbour distance (so the surface leaves no holes the far
+    side could be seen through), :math:`\rho` is the radius of the bounding
+    sphere and :math:`\tau` the :obj:`depth_tolerance`; the tolerance also
+    grows by twice the splat's footprint times the surface slope
+    :math:`\tan\theta_o` (at most 10), since neighbours on a tilted surface
+    are legitimately nearer. The radiance is a
+    bilinear sample of the image at :math:`\pi_v(p)`. Cameras follow the
+    OpenCV convention of :mod:`tg_intrinsic.geometry.cameras`.
+
+    Documented behaviour on imperfect input: observations that touch a NaN
+    pixel are masked out (with a warning that counts them); infinite or
+    negative pixels raise an error; 8-bit or clipped photographs raise a
+    warning (the method needs linear HDR radiance); a camera that sees no
+    point (e.g. behind the object or looking away) gets an all-false mask
+    column and a warning, and if no camera sees anything the transform
+    raises an error; points seen by no view keep all-false masks (counted
+    in a warning) and later get zero outgoing coefficients and entropy 1.
+
+    Args:
+        depth_tolerance (float, optional): :math:`\tau`, relative to the
+            bounding radius. (default: :obj:`0.02`)
+        min_cos (float, optional): Smallest :math:`n \cdot \omega_o` kept.
+            (default: :obj:`0.0`)
+        splat_radius (int, optional): Splat half-width in pixels; by default
+            it follows the projected point spacing. (default: :obj:`None`)
+
+    Shapes:
+        - **input:** ``pos`` :math:`(N, 3)`, ``normal`` :math:`(N, 3)`
+          (optional), ``images`` :math:`(V, H, W, 3)`, ``intrinsics``
+          :math:`(V, 3, 3)`, ``extrinsics`` :math:`(V, 3, 4)`
+        - **output:** ``obs_radiance`` :math:`(N, V, 3)` (0 where masked),
+          ``obs_dir`` :math:`(N, V, 3)` (unit, point to camera),
+          ``obs_mask`` :math:`(N, V)` (bool)
+    """
+    def __init__(self, depth_tolerance: float = 0.02, min_cos: float = 0.0,
+                 splat_radius: int = None):
+        self.depth_tolerance = check_positive_float(depth_tolerance,
+                                                    'depth_tolerance')
+        if not -1.0 <= min_cos < 1.0:
+            raise ValueError(f"'min_cos' must lie in [-1, 1), got {min_cos}")
+        self.min_cos = float(min_cos)
+        if splat_radius is not None and (not isinstance(splat_radius, int)
+                                         or splat_radius < 0):
+            raise ValueError(f"'splat_radius' must be a non-negative integer "
+                             f"or None, got {splat_radius!r}")
+        self.splat_radius = splat_radius
+
+    def forward(self, data: Data) -> Data:
+        pos = check_points(data.pos, 'pos')
+        normal = getattr(data, 'normal', None)
+        if normal is None:
+            normal = getattr(data, 'norm', None)
+        if normal is not None:
+            normal = check_vectors(normal, 'normal', pos.size(0), pos)
+        images = getattr(data, 'images', None)
+        if images is None:
+            raise ValueError("ProjectViews needs 'data.images' [V, H, W, 3] "
+                             "(linear HDR photographs) with "
+                             "'data.intrinsics' and 'data.extrinsics'")
+        images = check_tensor(images, 'images')
+        if images.dim() != 4 or images.size(-1) != 3:
+            raise ValueError(f"'images' must have shape [V, H, W, 3], got "
+                             f"{list(images.shape)}")
+        if not images.is_floating_point():
+            raise ValueError(f"'images' must hold floating-point linear "
+                             f"radiance, got {images.dtype}; 8-bit images "
+                             f"are not HDR")
+        num_views = check_cameras(getattr(data, 'intrinsics', None),
+                                  getattr(data, 'extrinsics', None), pos)
+        if images.size(0) != num_views:
+            raise ValueError(f"there are {images.size(0)} images but "
+                             f"{num_views} cameras")
+        finite = torch.isfinite(images) | torch.isnan(images)
+        if not bool(finite.all()) or bool((images < 0).any()):
+            raise ValueError("'images' hold infinite or negative radiance; "
+                             "linear HDR photographs must be finite and >= 0 "
+                             "(mark missing pixels as NaN)")
+        from tg_intrinsic.io.hdr import looks_clipped
+        if looks_clipped(images):
+            warnings.warn("the images look 8-bit or clipped (values on a "
+                          "1/255 grid or piled up at their maximum); the "
+                          "recovery assumes linear, unclipped HDR radiance, "
+                          "so highlights will be underestimated",
+                          stacklevel=2)
+        height, width = images.shape[1:3]
+        intrinsics = data.intrinsics.to(pos.dtype)
+        extrinsics = data.extrinsics.to(pos.dtype)
+
+        uv, depth = project(pos, intrinsics, extrinsics)
+        centre = pos.mean(0)
+        scale = (pos - centre).norm(dim=-1).max().clamp_min(1e-12)
+        inside = (depth > 1e-6 * scale) & (uv[..., 0] >= 0) \
+            & (uv[..., 0] < width) & (uv[..., 1] >= 0) & (uv[..., 1] < height)
+        centers = camera_centers(extrinsics)
+        to_camera = centers.unsqueeze(1) - pos.unsqueeze(0)  # (V, N, 3)
+        direction = to_camera / to_camera.norm(dim=-1, keepdim=True
+                                               ).clamp_min(1e-30)
+        if normal is not None:
+            n = normal / normal.norm(dim=-1, keepdim=True).clamp_min(1e-30)
+            cos = (direction * n.unsqueeze(0)).sum(-1)
+            inside &= cos > self.min_cos
+            slope = (1 - cos * cos).clamp_min(0).sqrt() / cos.clamp_min(0.1)
+        else:
+            slope = torch.ones_like(depth)
+
+        radius = self._radius(pos, intrinsics, depth)
+        buffer = splat_depth(uv, depth, inside, radius, height, width)
+        col = uv[..., 0].floor().long().clamp(0, width - 1)
+        row = uv[..., 1].floor().long().clamp(0, height - 1)
+        nearest = buffer.view(num_views, -1).gather(1, row * width + col)
+        # A splat is flat, but the surface under it is tilted: neighbours
+        # may be nearer by up to their footprint times the slope.
+        footprint = (radius + 1) * depth / intrinsics[:, 0, 0].unsqueeze(1)
+        tolerance = self.depth_tolerance * scale + 2 * footprint * slope
+        mask = inside & (depth <= nearest + tolerance)
+
+        radiance, nan = sample_images(images.to(pos.dtype), uv)
+        lost = mask & nan
+        if bool(lost.any()):
+            warnings.warn(f"{int(lost.sum())} observation(s) touch NaN pixels "
+                          f"and are masked out", stacklevel=2)
+            mask &= ~nan
+        radiance = torch.where(mask.unsqueeze(-1), radiance,
+                               torch.zeros_like(radiance))
+
+        seen = mask.any(0)
+        views_seeing = mask.any(1)
+        if not bool(views_seeing.any()):
+            raise ValueError("no camera sees any point: check that the "
+                             "extrinsics are world-to-camera [R | t] (OpenCV, "
+                             "looking along +z) and that the object lies in "
+                             "front of the cameras")
+        if not bool(views_seeing.all()):
+            blind = (~views_seeing).nonzero().flatten().tolist()
+            warnings.warn(f"camera(s) {blind[:10]} see no point (behind the "
+                          f"object or looking away); they are ignored",
+                          stacklevel=2)
+        if not bool(seen.all()):
+            warnings.warn(f"{int((~seen).sum())} of {seen.numel()} points are "
+                          f"seen by no view; their outgoing radiance is "
+                          f"unknown and their entropy will be 1",
+                          stacklevel=2)
+        data = data.clone()
+        data.obs_radiance = radiance.transpose(0, 1).contiguous()
+        data.obs_dir = direction.transpose(0, 1).contiguous()
+        data.obs_mask = mask.t().contiguous()
+        return data
+
+    def _radius(self, pos, intrinsics, depth):
+        """Splat half-widths (V, N): 0.75 of each point's own spacing (its
+        nearest-neighbour distance, at most 3 median spacings) in pixels."""
+        if self.splat_radius is not None:
+            return torch.full_like(depth, self.splat_radius, dtype=torch.long)
+        if pos.size(0) < 2:
+            return torch.zeros_like(depth, dtype=torch.long)
+        edge = knn(pos, 1)
+        spacing = torch.zeros(pos.size(0), dtype=pos.dtype, device=pos.device)
+        spacing[edge[1]] = (pos[edge[0]] - pos[edge[1]]).norm(dim=-1)
+        spacing = spacing.clamp_max(3 * spacing.median())
+        focal = intrinsics[:, 0, 0].unsqueeze(1)
+        pixels = 0.75 * spacing * focal / depth.clamp_min(1e-12)
+        return pixels.ceil().clamp(0, 8).long()
+
+    def __repr__(self) -> str:
+        return (f'{self.__class__.__name__}(depth_tolerance='
+                f'{self.depth_tolerance}, min_cos={self.min_cos}, '
+                f'splat_radius={self.splat_radius})')

@@ -16,3 +16,5 @@ __all__ = [
     'SyntheticModelNet',
     'MeshFolder',
 ]
+from .svbrdf_scene import svbrdf_scene, look_at_cameras  # noqa: E402
+__all__ += ['svbrdf_scene', 'look_at_cameras']

@@ -1,0 +1,346 @@
+"""The renderer against brute-force quadrature of the reflection integral,
+analytic answers (constant environment, white furnace by an independent 2D
+quadrature), rotation symmetry; the rasteriser against per-pixel ray
+casting in numpy; visibility and images; bad input."""
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from tg_intrinsic.geometry.envmap import (equirect_directions,
+                                          equirect_lookup,
+                                          equirect_solid_angles)
+from tg_intrinsic.geometry.render import (_lookup_numpy, camera_centers,
+                                          point_visibility, rasterize,
+                                          render_images, render_radiance)
+from tg_intrinsic.geometry.sh import (principled_to_torrance_sparrow,
+                                      schlick_fresnel, smith_g1)
+
+D64 = torch.float64
+
+
+def unit(x):
+    return x / x.norm(dim=-1, keepdim=True)
+
+
+def sky_with_sun(height=32, width=64):
+    """A smooth sky plus a sun about one pixel wide, 300x brighter."""
+    g = torch.Generator().manual_seed(0)
+    d = equirect_directions(height, width)
+    env = 0.2 + 0.5 * d[..., 2:].clamp_min(0) * torch.tensor(
+        [0.4, 0.6, 1.0], dtype=D64)
+    env = env + 0.2 * torch.rand(height, width, 3, dtype=D64, generator=g)
+    sun = unit(torch.tensor([0.5, 0.3, 0.6], dtype=D64))
+    env = env + ((d @ sun) > math.cos(0.06))[..., None].double() * 300.0
+    return env
+
+
+def scene_points(num=3, views=3, seed=1):
+    g = torch.Generator().manual_seed(seed)
+    n = unit(torch.randn(num, 3, dtype=D64, generator=g))
+    wo = unit(torch.randn(num, views, 3, dtype=D64, generator=g))
+    wo = torch.where((wo * n[:, None]).sum(-1, keepdim=True) < 0, -wo, wo)
+    return n, wo
+
+
+def brute_force(env, n, wo, base_color, metallic, roughness, rows=512):
+    """Every direction of a dense equirectangular grid (rows x 2 rows),
+    bilinear radiance from torch's lookup, the BRDF as the module docstring
+    states it."""
+    dirs = equirect_directions(rows, 2 * rows)
+    omega = equirect_solid_angles(rows, 2 * rows)
+    L = equirect_lookup(env, dirs)
+    kd, r0, alpha = principled_to_torrance_sparrow(
+        base_color, torch.tensor(metallic, dtype=D64),
+        torch.tensor(roughness, dtype=D64))
+    alpha = alpha.clamp_min(1e-3)
+    out = torch.zeros(wo.shape[:2] + (3, ), dtype=D64)
+    for i in range(n.size(0)):
+        ci = dirs @ n[i]
+        weight = (omega * (ci > 0))[..., None] * L
+        diffuse = (kd / math.pi * (ci.clamp_min(0)[..., None] * weight)
+                   .sum((0, 1)))
+        for v in range(wo.size(1)):
+            co = (wo[i, v] @ n[i]).clamp_min(1e-12)
+            h = unit(dirs + wo[i, v])
+            ch = h @ n[i]
+            D = alpha ** 2 / (math.pi * (ch ** 2 * (alpha ** 2 - 1) + 1) ** 2)
+            F = schlick_fresnel((h @ wo[i, v])[..., None], r0)
+            spec = (D * smith_g1(ci, alpha) * smith_g1(co, alpha)
+                    / (4 * co))[..., None] * F
+            out[i, v] = diffuse + (spec * weight).sum((0, 1))
+    return out
+
+
+def material(num, metallic, roughness):
+    return (torch.tensor([0.8, 0.5, 0.3], dtype=D64).expand(num, 3),
+            torch.full((num, ), metallic, dtype=D64),
+            torch.full((num, ), roughness, dtype=D64))
+
+
+def test_numba_lookup_matches_torch():
+    g = torch.Generator().manual_seed(0)
+    env = torch.rand(7, 12, 3, dtype=D64, generator=g)
+    d = unit(torch.randn(2000, 3, dtype=D64, generator=g))
+    poles = torch.tensor([[0, 0, 1.0], [0, 0, -1.0], [-1.0, 0, 0],
+                          [-1.0, -1e-17, 0]], dtype=D64)
+    d = torch.cat([d, poles])
+    np.testing.assert_allclose(_lookup_numpy(env.numpy(), d.numpy()),
+                               equirect_lookup(env, d).numpy(), atol=1e-13)
+
+
+@pytest.mark.parametrize('metallic', [0.0, 1.0])
+@pytest.mark.parametrize('roughness', [0.2, 0.4, 0.7])
+def test_converges_to_brute_force(metallic, roughness):
+    env = sky_with_sun()
+    n, wo = scene_points()
+    bc, m, r = material(n.size(0), metallic, roughness)
+    ref = brute_force(env, n, wo, bc[0], metallic, roughness)
+    out = render_radiance(n, bc, m, r, wo, env, specular_samples=1024,
+                          light_samples=1024)
+    assert float(((out - ref).abs() / ref).max()) < 0.01
+    # default quality: a few percent at worst on this sun
+    out = render_radiance(n, bc, m, r, wo, env)
+    assert float(((out - ref).abs() / ref).max()) < 0.04
+
+
+def test_constant_environment_diffuse_is_albedo():
+    env = torch.full((16, 32, 3), 2.5, dtype=D64)
+    n, wo = scene_points(5, 4)
+    bc = torch.rand(5, 3, dtype=D64, generator=torch.Generator()
+                    .manual_seed(3))
+    diffuse, _ = render_radiance(n, bc, torch.zeros(5, dtype=D64),
+                                 torch.full((5, ), 0.5, dtype=D64), wo,
+                                 env, separate=True)
+    expected = (2.5 * bc)[:, None].expand_as(diffuse)
+    torch.testing.assert_close(diffuse, expected, rtol=2e-4, atol=0)
+
+
+def directional_albedo(cos_o, alpha, steps=1500):
+    """:math:`\\int D G_1 G_1 / (4 \\cos_o) d\\omega_i` by a midpoint rule
+    over (theta_i, phi_i) of the upper hemisphere (numpy, F = 1)."""
+    theta = (np.arange(steps) + 0.5) * (math.pi / 2 / steps)
+    phi = (np.arange(2 * steps) + 0.5) * (math.pi / steps)
+    T, P = np.meshgrid(theta, phi, indexing='ij')
+    wi = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P),
+                   np.cos(T)], -1)
+    wo = np.array([math.sqrt(1 - cos_o ** 2), 0.0, cos_o])
+    h = wi + wo
+    h /= np.linalg.norm(h, axis=-1, keepdims=True)
+    a2 = alpha ** 2
+    D = a2 / (math.pi * (h[..., 2] ** 2 * (a2 - 1) + 1) ** 2)
+
+    def g1(c):
+        return 2 * c / (c + np.sqrt(a2 + (1 - a2) * c * c))
+    integrand = D * g1(wi[..., 2]) * g1(cos_o) / (4 * cos_o)
+    return float((integrand * np.sin(T)).sum() * (math.pi / 2 / steps)
+                 * (math.pi / steps))
+
+
+@pytest.mark.parametrize('roughness', [0.3, 0.6, 0.9])
+def test_white_furnace(roughness):
+    env = torch.full((16, 32, 3), 1.5, dtype=D64)
+    angles = torch.tensor([0.2, 0.9, 1.35], dtype=D64)
+    n = unit(torch.tensor([[0.3, -0.2, 0.9]], dtype=D64)).expand(3, 3)
+    # views at the given angles from the normal
+    t = unit(torch.linalg.cross(n, torch.tensor([[0, 0, 1.0]], dtype=D64)
+                                .expand(3, 3)))
+    wo = (torch.cos(angles)[:, None] * n
+          + torch.sin(angles)[:, None] * t)[:, None]
+    args = (n, torch.ones(3, 3, dtype=D64), torch.ones(3, dtype=D64),
+            torch.full((3, ), roughness, dtype=D64), wo, env)
+    fine = render_radiance(*args, specular_samples=1024, light_samples=1024)
+    default = render_radiance(*args)
+    for k in range(3):
+        expected = 1.5 * directional_albedo(math.cos(float(angles[k])),
+                                            roughness ** 2)
+        assert abs(float(fine[k, 0, 0]) / expected - 1) < 1e-3
+        assert abs(float(default[k, 0, 0]) / expected - 1) < 1e-2
+        torch.testing.assert_close(fine[k, 0, 0], fine[k, 0, 2])
+
+
+def rotation_z(angle):
+    c, s = math.cos(angle), math.sin(angle)
+    return torch.tensor([[c, -s, 0], [s, c, 0], [0, 0, 1.0]], dtype=D64)
+
+
+def test_rotation_about_z():
+    env = sky_with_sun()
+    n, wo = scene_points(6, 3, seed=4)
+    bc, m, r = material(6, 0.5, 0.45)
+    shift = 5  # columns: a rotation by 5 pixel widths
+    Rz = rotation_z(2 * math.pi * shift / env.size(1))
+    rotated = torch.roll(env, shift, dims=1)
+    d0, s0 = render_radiance(n, bc, m, r, wo, env, separate=True,
+                             specular_samples=512, light_samples=512)
+    d1, s1 = render_radiance(n @ Rz.T, bc, m, r, wo @ Rz.T, rotated,
+                             separate=True, specular_samples=512,
+                             light_samples=512)
+    torch.testing.assert_close(d1, d0, rtol=1e-10, atol=0)
+    assert float(((s1 - s0).abs() / (d0 + s0)).max()) < 0.01
+
+
+def test_separate_parts_masks_and_back_views():
+    env = sky_with_sun(16, 32)
+    n, wo = scene_points(4, 3)
+    wo[0, 1] = -wo[0, 1]  # now below the horizon
+    bc, m, r = material(4, 0.3, 0.5)
+    mask = torch.ones(4, 3, dtype=torch.bool)
+    mask[2, 2] = False
+    total = render_radiance(n, bc, m, r, wo, env, mask=mask)
+    d, s = render_radiance(n, bc, m, r, wo, env, mask=mask, separate=True)
+    torch.testing.assert_close(total, d + s)
+    assert bool((total[0, 1] == 0).all()) and bool((total[2, 2] == 0).all())
+    assert bool((total[1] > 0).all())
+    # float32 in, float32 out; same seed, same numbers
+    out32 = render_radiance(n.float(), bc.float(), m.float(), r.float(),
+                            wo.float(), env.float(), mask=mask)
+    assert out32.dtype == torch.float32
+    torch.testing.assert_close(out32.double(), total, rtol=1e-5, atol=1e-6)
+
+
+def test_render_radiance_bad_input():
+    env = torch.ones(8, 16, 3, dtype=D64)
+    n, wo = scene_points(2, 2)
+    bc, m, r = material(2, 0.0, 0.5)
+    with pytest.raises(ValueError, match='roughness'):
+        render_radiance(n, bc, m, r + 0.7, wo, env)
+    with pytest.raises(ValueError, match='normal'):
+        render_radiance(n * float('nan'), bc, m, r, wo, env)
+    with pytest.raises(ValueError, match='view_dirs'):
+        render_radiance(n, bc, m, r, wo[:, :, :2], env)
+    with pytest.raises(ValueError, match='view_dirs'):
+        render_radiance(n, bc, m, r, torch.zeros_like(wo), env)
+    with pytest.raises(ValueError, match='envmap'):
+        render_radiance(n, bc, m, r, wo, -env)
+    with pytest.raises(ValueError, match='base_color'):
+        render_radiance(n, bc[:, :2], m, r, wo, env)
+    with pytest.raises(ValueError, match='specular_samples'):
+        render_radiance(n, bc, m, r, wo, env, specular_samples=0)
+
+
+# ---------------------------------------------------------- rasteriser
+def camera(eye, target=(0, 0, 0), focal=40.0, size=(40, 48)):
+    from tg_intrinsic.datasets.svbrdf_scene import look_at_cameras
+    fov = 2 * math.degrees(math.atan(size[0] / 2 / focal))
+    K, E = look_at_cameras(torch.tensor([eye], dtype=D64), target, fov,
+                           size)
+    return K[0], E[0]
+
+
+def small_mesh():
+    import trimesh
+    ico = trimesh.creation.icosphere(subdivisions=1)
+    V = torch.tensor(ico.vertices, dtype=D64) * 0.8
+    F = torch.tensor(ico.faces, dtype=torch.long)
+    # a big triangle through the camera plane, partly behind the camera
+    extra = torch.tensor([[-3.0, -2.0, 3.5], [3.0, -1.5, 3.5],
+                          [0.0, 2.5, -1.5]], dtype=D64)
+    V = torch.cat([V, extra])
+    F = torch.cat([F, torch.tensor([[len(V) - 3, len(V) - 2, len(V) - 1]])])
+    return V, F.t().contiguous()
+
+
+def brute_force_raster(V, F, K, E, height, width, near=1e-6):
+    """Moller-Trumbore of every pixel-centre ray with every triangle."""
+    cam = (V @ E[:, :3].T + E[:, 3]).numpy()
+    Kinv = np.linalg.inv(K.numpy())
+    jj, ii = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    d = np.stack([jj, ii, np.ones_like(jj)], -1) @ Kinv.T  # d_z = 1
+    best = np.full((height, width), np.inf)
+    fid = np.full((height, width), -1)
+    edge = np.full((height, width), np.inf)
+    for f, (a, b, c) in enumerate(F.t().numpy()):
+        A, B, C = cam[a], cam[b], cam[c]
+        e1, e2 = B - A, C - A
+        p = np.cross(d, e2)
+        det = p @ e1
+        with np.errstate(divide='ignore', invalid='ignore'):
+            u = (p * (-A)).sum(-1) / det
+            q = np.cross(-A, e1)
+            v = (q * d).sum(-1) / det
+            t = (q @ e2) / det
+        hit = (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= near)
+        closer = hit & (t < best)
+        best[closer] = t[closer]
+        fid[closer] = f
+        margin = np.minimum(np.minimum(u, v), 1 - u - v)
+        edge = np.where(hit, np.minimum(edge, np.abs(margin)), edge)
+    return fid, best, edge
+
+
+def test_rasterize_matches_ray_casting():
+    V, F = small_mesh()
+    K, E = camera([0.3, -2.2, 1.0])
+    face_id, bary, depth = rasterize(V, F, K, E, 40, 48)
+    ref, ref_depth, edge = brute_force_raster(V, F, K, E, 40, 48)
+    assert (ref >= 0).sum() > 200 and (ref == F.size(1) - 1).sum() > 20
+    differ = face_id.numpy() != ref
+    # only where the pixel centre is within 1e-6 of a triangle edge
+    assert np.all(edge[differ] < 1e-6)
+    same = ~differ & (ref >= 0)
+    np.testing.assert_allclose(depth.numpy()[same], ref_depth[same],
+                               rtol=1e-9)
+    # the barycentrics rebuild the hit point on the ray
+    cam = V @ E[:, :3].T + E[:, 3]
+    corners = F.t()[face_id.clamp_min(0)]
+    hit = (bary[..., None] * cam[corners]).sum(-2)
+    u = K[0, 0] * hit[..., 0] / hit[..., 2] + K[0, 2]
+    v = K[1, 1] * hit[..., 1] / hit[..., 2] + K[1, 2]
+    jj, ii = np.meshgrid(np.arange(48) + 0.5, np.arange(40) + 0.5)
+    covered = face_id.numpy() >= 0
+    np.testing.assert_allclose(u.numpy()[covered], jj[covered], atol=1e-8)
+    np.testing.assert_allclose(v.numpy()[covered], ii[covered], atol=1e-8)
+    assert np.all(np.isinf(depth.numpy()[~covered]))
+
+
+def test_rasterize_behind_camera_is_empty():
+    V, F = small_mesh()
+    K, E = camera([0.0, -3.0, 0.0], target=(0.0, -6.0, 0.0))
+    face_id, _, depth = rasterize(V[:-3], F[:, :-1], K, E, 20, 24)
+    assert bool((face_id == -1).all()) and bool(torch.isinf(depth).all())
+
+
+def test_point_visibility_two_layers():
+    # two parallel squares; the back one is hidden where the front one is
+    quad = torch.tensor([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0.0]],
+                        dtype=D64)
+    front = quad * torch.tensor([0.5, 0.5, 1], dtype=D64) \
+        + torch.tensor([0, 0, 1.0], dtype=D64)
+    V = torch.cat([quad, front])
+    F = torch.tensor([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]).t()
+    K, E = camera([0.0, 0.0, 5.0], focal=30.0, size=(32, 32))
+    pts = torch.tensor([[0.0, 0.1, 0.0], [0.9, 0.9, 0.0], [0.1, 0.2, 1.0],
+                        [0.0, 0.0, 9.0], [30.0, 0.0, 0.0]], dtype=D64)
+    vis = point_visibility(pts, V, F, K[None], E[None], 32, 32)[:, 0]
+    assert vis.tolist() == [False, True, True, False, False]
+    torch.testing.assert_close(camera_centers(E[None])[0],
+                               torch.tensor([0.0, 0.0, 5.0], dtype=D64))
+
+
+def test_render_images_background_and_bad_input():
+    import trimesh
+    ico = trimesh.creation.icosphere(subdivisions=2)
+    V = torch.tensor(ico.vertices, dtype=D64)
+    F = torch.tensor(ico.faces).t().contiguous()
+    n = V.clone()
+    K, E = camera([0.0, -3.0, 0.5], focal=25.0, size=(24, 24))
+    K2, E2 = camera([0.0, 3.0, 0.0], target=(0.0, 6.0, 0.0), size=(24, 24))
+    env = sky_with_sun(16, 32)
+    bc, m, r = material(len(V), 0.0, 0.6)
+    img = render_images(V, F, n, bc, m, r, torch.stack([K, K2]),
+                        torch.stack([E, E2]), 24, 24, env)
+    assert img.shape == (2, 24, 24, 3) and img.dtype == torch.float32
+    face_id, _, _ = rasterize(V, F, K, E, 24, 24)
+    assert bool((img[0][face_id < 0] == 0).all())
+    assert bool((img[0][face_id >= 0].sum(-1) > 0).float().mean() > 0.95)
+    assert bool((img[1] == 0).all())  # looks away: an empty image
+    with pytest.raises(ValueError, match='extrinsics'):
+        bad = E.clone()
+        bad[:, :3] *= 2
+        render_images(V, F, n, bc, m, r, K[None], bad[None], 24, 24, env)
+    with pytest.raises(ValueError, match='faces|face'):
+        rasterize(V, F.t(), K, E, 24, 24)
+    with pytest.raises(ValueError, match='intrinsics'):
+        rasterize(V, F, K[:2], E, 24, 24)

@@ -117,7 +117,7 @@ def test_constant_environment_diffuse_is_albedo():
     torch.testing.assert_close(diffuse, expected, rtol=2e-4, atol=0)
 
 
-def directional_albedo(cos_o, alpha, steps=1500):
+def directional_albedo(cos_o, alpha, steps=800):
     """:math:`\\int D G_1 G_1 / (4 \\cos_o) d\\omega_i` by a midpoint rule
     over (theta_i, phi_i) of the upper hemisphere (numpy, F = 1)."""
     theta = (np.arange(steps) + 0.5) * (math.pi / 2 / steps)

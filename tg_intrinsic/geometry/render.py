@@ -673,13 +673,14 @@ def render_radiance(normal: Tensor, base_color: Tensor, metallic: Tensor,
 
 # ------------------------------------------------------------ rasteriser
 @njit(cache=True, parallel=True)
-def _face_boxes(cam, faces, K, near, height, width):  # pragma: no cover
-    """Screen bounding box ``(i0, i1, j0, j1)`` (inclusive pixel ranges,
-    empty when i0 > i1) of the part of every triangle in front of the near
-    plane: the triangle clipped against z = near (Sutherland-Hodgman, at
-    most four corners), projected."""
+def _face_extents(cam, faces, K, near, height, width):  # pragma: no cover
+    """Screen extent ``(vmin, vmax, umin, umax)`` of the part of every
+    triangle in front of the near plane (the triangle clipped against
+    z = near by Sutherland-Hodgman, at most four corners, projected),
+    clamped to a margin around the image; ``vmin > vmax`` when nothing is
+    in front."""
     num = faces.shape[0]
-    box = np.empty((num, 4), dtype=np.int64)
+    ext = np.empty((num, 4))
     for f in prange(num):
         umin, vmin = np.inf, np.inf
         umax, vmax = -np.inf, -np.inf
@@ -708,19 +709,32 @@ def _face_boxes(cam, faces, K, near, height, width):  # pragma: no cover
                 vmin, vmax = min(vmin, v), max(vmax, v)
                 count += 1
         if count == 0:
+            ext[f, 0], ext[f, 1], ext[f, 2], ext[f, 3] = 1.0, 0.0, 1.0, 0.0
+            continue
+        # near-plane corners project far away: clamp before any int cast
+        ext[f, 0] = min(max(vmin, -2.0), height + 2.0)
+        ext[f, 1] = min(max(vmax, -2.0), height + 2.0)
+        ext[f, 2] = min(max(umin, -2.0), width + 2.0)
+        ext[f, 3] = min(max(umax, -2.0), width + 2.0)
+    return ext
+
+
+@njit(cache=True, parallel=True)
+def _face_boxes(cam, faces, K, near, height, width):  # pragma: no cover
+    """Inclusive pixel ranges ``(i0, i1, j0, j1)`` whose centres
+    :math:`(j + \\frac12, i + \\frac12)` may fall in each triangle's
+    extent (one pixel of slack against rounding); empty when i0 > i1."""
+    ext = _face_extents(cam, faces, K, near, height, width)
+    num = faces.shape[0]
+    box = np.empty((num, 4), dtype=np.int64)
+    for f in prange(num):
+        if ext[f, 0] > ext[f, 1]:
             box[f, 0], box[f, 1], box[f, 2], box[f, 3] = 1, 0, 1, 0
             continue
-        # pixel centres (j + 0.5, i + 0.5) inside the box, one pixel of
-        # slack against rounding; clamp before converting (near-plane
-        # corners project far away)
-        vmin = min(max(vmin, -2.0), height + 2.0)
-        vmax = min(max(vmax, -2.0), height + 2.0)
-        umin = min(max(umin, -2.0), width + 2.0)
-        umax = min(max(umax, -2.0), width + 2.0)
-        box[f, 0] = max(0, np.int64(math.floor(vmin - 0.5)) - 1)
-        box[f, 1] = min(height - 1, np.int64(math.ceil(vmax - 0.5)) + 1)
-        box[f, 2] = max(0, np.int64(math.floor(umin - 0.5)) - 1)
-        box[f, 3] = min(width - 1, np.int64(math.ceil(umax - 0.5)) + 1)
+        box[f, 0] = max(0, np.int64(math.floor(ext[f, 0] - 0.5)) - 1)
+        box[f, 1] = min(height - 1, np.int64(math.ceil(ext[f, 1] - 0.5)) + 1)
+        box[f, 2] = max(0, np.int64(math.floor(ext[f, 2] - 0.5)) - 1)
+        box[f, 3] = min(width - 1, np.int64(math.ceil(ext[f, 3] - 0.5)) + 1)
     return box
 
 
@@ -806,29 +820,45 @@ def _visibility_kernel(cam, faces, K, near, height, width, points,
     """Ray casting from the camera centre to every point: occluded iff the
     ray hits a triangle strictly before the point (coefficient sum > 1 +
     tol; the point's own triangles give exactly 1). Candidate triangles
-    come from a screen grid of 4 x 4 pixel cells holding every triangle
-    whose clipped bounding box overlaps the cell."""
-    box = _face_boxes(cam, faces, K, near, height, width)
-    cell = 4
-    gh = (height + cell - 1) // cell
-    gw = (width + cell - 1) // cell
-    count = np.zeros(gh * gw + 1, dtype=np.int64)
+    come from a screen grid (about F / 2 cells, finer than the pixels for
+    fine meshes) holding every triangle whose clipped extent overlaps the
+    cell."""
+    ext = _face_extents(cam, faces, K, near, height, width)
     num_faces = faces.shape[0]
+    # about two triangles per cell when they cover the image evenly
+    side = max(1, np.int64(math.sqrt(num_faces / 2.0)))
+    gh = min(side, 4 * height)
+    gw = min(side, 4 * width)
+    sy = gh / height
+    sx = gw / width
+    lo = np.empty((num_faces, 4), dtype=np.int64)
     for f in range(num_faces):
-        if box[f, 0] > box[f, 1] or box[f, 2] > box[f, 3]:
+        if ext[f, 0] > ext[f, 1] or ext[f, 2] > ext[f, 3] \
+                or ext[f, 1] < 0 or ext[f, 0] > height \
+                or ext[f, 3] < 0 or ext[f, 2] > width:
+            lo[f, 0], lo[f, 1] = 1, 0
             continue
-        for gi in range(box[f, 0] // cell, box[f, 1] // cell + 1):
-            for gj in range(box[f, 2] // cell, box[f, 3] // cell + 1):
+        # one cell of slack against rounding
+        lo[f, 0] = max(0, np.int64(math.floor(ext[f, 0] * sy)) - 1)
+        lo[f, 1] = min(gh - 1, np.int64(math.floor(ext[f, 1] * sy)) + 1)
+        lo[f, 2] = max(0, np.int64(math.floor(ext[f, 2] * sx)) - 1)
+        lo[f, 3] = min(gw - 1, np.int64(math.floor(ext[f, 3] * sx)) + 1)
+    count = np.zeros(gh * gw + 1, dtype=np.int64)
+    for f in range(num_faces):
+        if lo[f, 0] > lo[f, 1]:
+            continue
+        for gi in range(lo[f, 0], lo[f, 1] + 1):
+            for gj in range(lo[f, 2], lo[f, 3] + 1):
                 count[gi * gw + gj + 1] += 1
     for g in range(gh * gw):
         count[g + 1] += count[g]
     fill = count[:-1].copy()
     entries = np.empty(count[-1], dtype=np.int64)
     for f in range(num_faces):
-        if box[f, 0] > box[f, 1] or box[f, 2] > box[f, 3]:
+        if lo[f, 0] > lo[f, 1]:
             continue
-        for gi in range(box[f, 0] // cell, box[f, 1] // cell + 1):
-            for gj in range(box[f, 2] // cell, box[f, 3] // cell + 1):
+        for gi in range(lo[f, 0], lo[f, 1] + 1):
+            for gj in range(lo[f, 2], lo[f, 3] + 1):
                 entries[fill[gi * gw + gj]] = f
                 fill[gi * gw + gj] += 1
     num = points.shape[0]
@@ -842,8 +872,8 @@ def _visibility_kernel(cam, faces, K, near, height, width, points,
         v = K[1, 1] * py / pz + K[1, 2]
         if not (u >= 0.0 and u < width and v >= 0.0 and v < height):
             continue
-        gi = min(np.int64(v) // cell, gh - 1)
-        gj = min(np.int64(u) // cell, gw - 1)
+        gi = min(np.int64(v * sy), gh - 1)
+        gj = min(np.int64(u * sx), gw - 1)
         g = gi * gw + gj
         hidden = False
         for e in range(count[g], count[g + 1]):

@@ -420,9 +420,13 @@ def looks_clipped(image) -> bool:
         return True  # integer pixels are 8- or 16-bit by construction
     image = image.reshape(-1, image.size(-1)) if image.dim() > 1 \
         else image.reshape(-1, 1)
-    image = image[~torch.isnan(image).any(-1)]
-    if image.numel() == 0:
+    masked = torch.isnan(image).any(-1)
+    num_valid = image.size(0) - int(masked.sum())
+    if num_valid == 0:
         return False
+    if num_valid < image.size(0):
+        # 0 is on the 1/255 grid and never the (positive) maximum
+        image = image.masked_fill(masked[:, None], 0.0)
     largest = float(image.max())
     if not (0 < largest <= 1):
         return False
@@ -430,7 +434,7 @@ def looks_clipped(image) -> bool:
     if bool(((scaled - scaled.round()).abs() <= 1e-3).all()):
         return True
     at_max = int((image == image.max()).any(-1).sum())
-    return at_max >= max(4, 0.01 * image.size(0))
+    return at_max >= max(4, 0.01 * num_valid)
 
 
 def read_envmap(path) -> torch.Tensor:

@@ -9,6 +9,7 @@ the mirror direction :math:`r = 2 (n \cdot \omega_o) n - \omega_o`, in which
 the specular lobe is a convolution of the incoming light with a kernel of
 SH attenuation :math:`e^{-(\alpha l)^2}`.
 """
+import functools
 import math
 
 import numba
@@ -16,7 +17,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from .sh import num_coefficients, power_spectrum, schlick_fresnel, smith_g1
+from .sh import (num_coefficients, power_spectrum, real_sh, schlick_fresnel,
+                 smith_g1)
 
 #: Smallest GGX width used by the model, as the original (roughness 0.03).
 MIN_ALPHA = 1e-3
@@ -53,10 +55,80 @@ def lobe_filter(l_max: int, alpha: Tensor, prefilter_alpha: float = 0.0
     return torch.exp(-(alpha.unsqueeze(-1) ** 2 - prefilter_alpha ** 2) * l * l)
 
 
-def sh_reflectance(sh_in: Tensor, irradiance: Tensor, basis_out: Tensor,
-                   cos_out: Tensor, base_color: Tensor, metallic: Tensor,
-                   roughness: Tensor, prefilter_alpha: float = 0.0,
-                   fresnel: bool = True, masking: bool = True) -> Tensor:
+@functools.lru_cache(maxsize=4)
+def _albedo_table_cpu(size: int, samples: int):
+    # Importance sampling of h ~ D(h) (n.h) with a Hammersley set: the
+    # estimate of f cos / pdf is G1(i) G1(o) (o.h) / ((n.o)(n.h)).
+    k = torch.arange(samples, dtype=torch.float64)
+    u1 = (k + 0.5) / samples
+    bits = k.long()
+    u2 = torch.zeros(samples, dtype=torch.float64)
+    scale = 0.5
+    for _ in range(32):  # radical inverse in base 2
+        u2 += (bits & 1).double() * scale
+        bits >>= 1
+        scale /= 2
+    mu = ((torch.arange(size, dtype=torch.float64) + 0.5) / size)[:, None,
+                                                                 None]
+    r = torch.linspace(0, 1, size, dtype=torch.float64)[None, :, None]
+    alpha = (r * r).clamp_min(MIN_ALPHA)
+    # GGX: tan^2(theta_h) = alpha^2 u / (1 - u)
+    cos_h = torch.sqrt((1 - u1) / (1 + (alpha * alpha - 1) * u1))
+    sin_h = torch.sqrt((1 - cos_h * cos_h).clamp_min(0))
+    phi = 2 * math.pi * u2
+    o = torch.cat([torch.sqrt(1 - mu * mu), torch.zeros_like(mu), mu], -1)
+    shape = (size, size, samples)
+    h = torch.stack([(sin_h * torch.cos(phi)).expand(shape),
+                     (sin_h * torch.sin(phi)).expand(shape),
+                     cos_h.expand(shape)], -1)
+    o_h = (o.unsqueeze(-2) * h).sum(-1)
+    cos_i = 2 * o_h * h[..., 2] - mu
+    weight = torch.where(
+        (cos_i > 0) & (o_h > 0),
+        smith_g1(cos_i, alpha) * smith_g1(mu, alpha) * o_h / (mu * h[..., 2]),
+        torch.zeros_like(cos_i))
+    schlick = (1 - o_h.clamp(0, 1)) ** 5
+    return ((weight * (1 - schlick)).mean(-1), (weight * schlick).mean(-1))
+
+
+def ggx_albedo_table(size: int = 32, samples: int = 2048):
+    r"""Directional albedo of the GGX lobe with Schlick's Fresnel,
+    :math:`\int f_r \cos\theta_i\, d\omega_i = R_0 A + B`, tabulated
+    over :math:`\mu = \cos\theta_o` (cell centres) and roughness
+    :math:`r \in [0, 1]` (:math:`\alpha = r^2`), each :math:`(size,
+    size)`: the "split-sum" factors of real-time rendering, here for the
+    separable Smith :math:`G`. Computed once per process (about 0.5 s)."""
+    return _albedo_table_cpu(size, samples)
+
+
+def ggx_albedo(cos_out: Tensor, roughness: Tensor, r0: Tensor) -> Tensor:
+    r""":math:`R_0 A(\mu, r) + B(\mu, r)` by bilinear interpolation in
+    :func:`ggx_albedo_table` (differentiable in :math:`r` and
+    :math:`R_0`): :obj:`cos_out` :math:`(N, V)`, :obj:`roughness`
+    :math:`(N)`, :obj:`r0` :math:`(N, 3)` to :math:`(N, V, 3)`."""
+    A, B = ggx_albedo_table()
+    size = A.size(0)
+    A, B = A.to(cos_out), B.to(cos_out)
+    x = (cos_out.clamp(0, 1) * size - 0.5).clamp(0, size - 1)
+    y = (roughness.clamp(0, 1) * (size - 1)).unsqueeze(-1).expand_as(x)
+    x0 = x.detach().floor().clamp(max=size - 2)
+    y0 = y.detach().floor().clamp(max=size - 2)
+    fx, fy = x - x0, y - y0
+    x0, y0 = x0.long(), y0.long()
+
+    def lerp(table):
+        top = table[x0, y0] * (1 - fy) + table[x0, y0 + 1] * fy
+        bottom = table[x0 + 1, y0] * (1 - fy) + table[x0 + 1, y0 + 1] * fy
+        return top * (1 - fx) + bottom * fx
+
+    return r0.unsqueeze(1) * lerp(A).unsqueeze(-1) + lerp(B).unsqueeze(-1)
+
+
+def sh_reflectance(sh_in: Tensor, irradiance: Tensor, mirror_dir: Tensor,
+                   base_color: Tensor, metallic: Tensor, roughness: Tensor,
+                   prefilter_alpha: float = 0.0, fresnel: bool = True,
+                   masking: bool = True, specular_model: str = 'eq5.11',
+                   basis_out: Tensor = None) -> Tensor:
     r"""Outgoing radiance of the principled BRDF under light given in
     spherical harmonics (thesis eq. 5.11),
 
@@ -73,9 +145,9 @@ def sh_reflectance(sh_in: Tensor, irradiance: Tensor, basis_out: Tensor,
     Args:
         sh_in (torch.Tensor): Incoming SH per point :math:`(N, K, 3)`.
         irradiance (torch.Tensor): :math:`E` per point :math:`(N, 3)`.
-        basis_out (torch.Tensor): Harmonics at the mirror directions
-            :math:`(N, V, K)`.
-        cos_out (torch.Tensor): :math:`\cos\theta_o` :math:`(N, V)`.
+        mirror_dir (torch.Tensor): Mirror directions :math:`r` in the local
+            frames :math:`(N, V, 3)`; their :math:`z` is
+            :math:`\cos\theta_o`.
         base_color, metallic, roughness (torch.Tensor): :math:`(N, 3)`,
             :math:`(N)`, :math:`(N)`.
         prefilter_alpha (float, optional): :math:`\alpha'`.
@@ -84,6 +156,20 @@ def sh_reflectance(sh_in: Tensor, irradiance: Tensor, basis_out: Tensor,
             :math:`R_0`. (default: :obj:`True`)
         masking (bool, optional): Apply :math:`G_\alpha(\theta_o)`.
             (default: :obj:`True`)
+        specular_model (str, optional): :obj:`'eq5.11'` as above, or
+            :obj:`'split_sum'`, which replaces :math:`F G_\alpha(\theta_o)`
+            (and the caller's shadowing) by the exact directional albedo
+            :math:`R_0 A(\theta_o, \alpha) + B(\theta_o, \alpha)` of
+            :func:`ggx_albedo`, so that uniform light is reflected exactly
+            at every roughness (eq. 5.11 overestimates rough lobes, whose
+            mass below the horizon it keeps), and reads the filtered light
+            at the lobe's dominant direction, :math:`r` pulled towards
+            :math:`n` by :math:`s = (1 - \alpha)(\sqrt{1 - \alpha} +
+            \alpha)` (Lagarde and de Rousiers 2014), as rough GGX lobes
+            lean towards the normal. (default: :obj:`'eq5.11'`)
+        basis_out (torch.Tensor, optional): Harmonics at
+            :obj:`mirror_dir`, if already computed (eq. 5.11 only).
+            (default: :obj:`None`)
 
     Returns:
         :math:`(N, V, 3)`.
@@ -95,15 +181,30 @@ def sh_reflectance(sh_in: Tensor, irradiance: Tensor, basis_out: Tensor,
     alpha = alpha + (MIN_ALPHA - alpha).clamp_min(0).detach()
     coefficients = sh_in * lobe_filter(l_max, alpha, prefilter_alpha
                                        ).unsqueeze(-1)
-    specular = basis_out @ coefficients  # (N, V, 3)
-    r0 = (0.04 + (base_color - 0.04) * metallic.unsqueeze(-1)).unsqueeze(1)
-    if fresnel:
-        specular = specular * schlick_fresnel(cos_out.unsqueeze(-1), r0)
+    cos_out = mirror_dir[..., 2]
+    r0 = 0.04 + (base_color - 0.04) * metallic.unsqueeze(-1)
+    if specular_model == 'split_sum':
+        lean = ((1 - alpha) * (torch.sqrt((1 - alpha).clamp_min(0)) + alpha)
+                ).view(-1, 1, 1)
+        normal = torch.zeros_like(mirror_dir)
+        normal[..., 2] = 1
+        dominant = normal + lean * (mirror_dir - normal)
+        dominant = dominant / dominant.norm(dim=-1, keepdim=True
+                                            ).clamp_min(1e-12)
+        specular = real_sh(dominant, l_max) @ coefficients
+        specular = specular * ggx_albedo(cos_out, roughness, r0)
     else:
-        specular = specular * r0
-    if masking:
-        specular = specular * smith_g1(cos_out, alpha.unsqueeze(-1)
-                                       ).unsqueeze(-1)
+        if basis_out is None:
+            basis_out = real_sh(mirror_dir, l_max)
+        specular = basis_out @ coefficients  # (N, V, 3)
+        r0 = r0.unsqueeze(1)
+        if fresnel:
+            specular = specular * schlick_fresnel(cos_out.unsqueeze(-1), r0)
+        else:
+            specular = specular * r0
+        if masking:
+            specular = specular * smith_g1(cos_out, alpha.unsqueeze(-1)
+                                           ).unsqueeze(-1)
     diffuse = base_color * (1 - metallic.unsqueeze(-1)) * irradiance / math.pi
     return diffuse.unsqueeze(1) + specular
 

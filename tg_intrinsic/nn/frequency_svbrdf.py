@@ -9,7 +9,8 @@ from torch_geometric.data import Data
 from tg_intrinsic.geometry import knn, mesh_edges
 from tg_intrinsic.geometry.brdf import MIN_ALPHA, sh_reflectance
 from tg_intrinsic.geometry.sh import real_sh, smith_g1
-from tg_intrinsic.geometry._checks import (check_positive_float,
+from tg_intrinsic.geometry._checks import (check_choice,
+                                           check_positive_float,
                                            check_positive_int)
 from tg_intrinsic.nn.svbrdf_result import SVBRDFResult
 
@@ -49,6 +50,13 @@ class FrequencySVBRDF(torch.nn.Module):
             (default: :obj:`True`)
         shadowing (bool, optional): :math:`G_\alpha(\theta_i)` on the light.
             (default: :obj:`True`)
+        specular_model (str, optional): :obj:`'eq5.11'` (the paper's model
+            above) or :obj:`'split_sum'`: the prefiltered light times the
+            exact directional albedo of the GGX lobe,
+            :math:`R_0 A(\theta_o, \alpha) + B(\theta_o, \alpha)`, in place
+            of :math:`F G_\alpha(\theta_o)` and the shadowing (see
+            :func:`~tg_intrinsic.geometry.brdf.sh_reflectance`).
+            (default: :obj:`'eq5.11'`)
 
     Shapes:
         - **input:** a :class:`~torch_geometric.data.Data` prepared by
@@ -58,7 +66,7 @@ class FrequencySVBRDF(torch.nn.Module):
     """
     def __init__(self, num_points: int, texture_shape=None,
                  fresnel: bool = True, masking: bool = True,
-                 shadowing: bool = True):
+                 shadowing: bool = True, specular_model: str = 'eq5.11'):
         super().__init__()
         self.num_points = check_positive_int(num_points, 'num_points')
         if texture_shape is not None:
@@ -71,6 +79,8 @@ class FrequencySVBRDF(torch.nn.Module):
         self.texture_shape = texture_shape
         self.fresnel, self.masking, self.shadowing = fresnel, masking, \
             shadowing
+        self.specular_model = check_choice(specular_model, 'specular_model',
+                                           ('eq5.11', 'split_sum'))
         self.base_color = Parameter(torch.empty(num_points, 3))
         self.metallic = Parameter(torch.empty(num_points))
         self.roughness = Parameter(torch.empty(num_points))
@@ -106,19 +116,18 @@ class FrequencySVBRDF(torch.nn.Module):
     def shadowed_light(self, data: Data) -> Tensor:
         r"""The incoming SH of :math:`G_\alpha(\theta_i) L` with the current
         roughness (no gradient: refitted every few steps, as the
-        original)."""
+        original). :math:`G_\alpha` is 0 below the horizon."""
         from tg_intrinsic.transforms.fit_spherical_harmonics import (
             light_directions, light_fit_matrix)
-        light = data.light_radiance
+        dtype = data.sh_in.dtype
+        light = data.light_radiance.to(dtype)
         l_max = int(round(math.sqrt(data.sh_in.size(1)))) - 1
-        local = light_directions(light.size(1), light.dtype, light.device)
-        regularizer = float(data.sh_regularizer.reshape(-1)[0]) if getattr(
-            data, 'sh_regularizer', None) is not None else 1e-4
-        fit = light_fit_matrix(local, l_max, regularizer)
-        alpha = (self.roughness.detach().to(light.dtype) ** 2
-                 ).clamp_min(MIN_ALPHA)
+        local = light_directions(light.size(1), dtype, light.device)
+        alpha = (self.roughness.detach().to(dtype) ** 2).clamp_min(MIN_ALPHA)
         shadow = smith_g1(local[:, 2].unsqueeze(0), alpha.unsqueeze(-1))
-        return fit @ (shadow.unsqueeze(-1) * light)
+        regularizer = float(data.sh_regularizer.reshape(-1)[0])
+        return light_fit_matrix(local, l_max, regularizer) @ (
+            shadow.unsqueeze(-1) * light)
 
     def forward(self, data: Data, sh_in: Tensor = None,
                 basis: Tensor = None) -> Tensor:
@@ -128,16 +137,14 @@ class FrequencySVBRDF(torch.nn.Module):
         self._check(data)
         if sh_in is None:
             sh_in = data.sh_in
-        l_max = int(round(math.sqrt(sh_in.size(1)))) - 1
-        if basis is None:
-            basis = real_sh(data.mirror_dir, l_max)
         dtype = sh_in.dtype
         return sh_reflectance(
-            sh_in, data.irradiance.to(dtype), basis.to(dtype),
-            data.mirror_dir[..., 2].to(dtype), self.base_color.to(dtype),
-            self.metallic.to(dtype), self.roughness.to(dtype),
+            sh_in, data.irradiance.to(dtype), data.mirror_dir.to(dtype),
+            self.base_color.to(dtype), self.metallic.to(dtype),
+            self.roughness.to(dtype),
             float(data.sh_prefilter.reshape(-1)[0]), self.fresnel,
-            self.masking)
+            self.masking, self.specular_model,
+            None if basis is None else basis.to(dtype))
 
     def fit(self, data: Data, steps: int = 200, lr: float = 0.01,
             init: str = 'spectrum', shadowing_every: int = 50,
@@ -207,14 +214,16 @@ class FrequencySVBRDF(torch.nn.Module):
         target = target.to(data.sh_in.dtype)
         normaliser = 3 * weight.sum().clamp_min(1e-30)
         l_max = int(round(math.sqrt(data.sh_in.size(1)))) - 1
-        basis = real_sh(data.mirror_dir, l_max)
+        basis = real_sh(data.mirror_dir, l_max) \
+            if self.specular_model == 'eq5.11' else None
         edges = self._graph(data, tv_k) if tv_weight > 0 else None
         optimizer = torch.optim.Adam(self.parameters(), lr=lr)
         history = []
         sh_in = data.sh_in
         for step in tqdm(range(steps), disable=not progress,
                          desc='FrequencySVBRDF'):
-            if self.shadowing and step % shadowing_every == 0:
+            if self.shadowing and self.specular_model == 'eq5.11' \
+                    and step % shadowing_every == 0:
                 sh_in = self.shadowed_light(data)
             loss = (weight * (self(data, sh_in, basis) - target).abs()
                     ).sum() / normaliser
@@ -268,4 +277,5 @@ class FrequencySVBRDF(torch.nn.Module):
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}({self.num_points}, '
                 f'texture_shape={self.texture_shape}, fresnel={self.fresnel}, '
-                f'masking={self.masking}, shadowing={self.shadowing})')
+                f'masking={self.masking}, shadowing={self.shadowing}, '
+                f'specular_model={self.specular_model!r})')

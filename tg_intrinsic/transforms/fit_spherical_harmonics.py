@@ -10,7 +10,8 @@ from tg_intrinsic.geometry._checks import (check_points,
                                            check_positive_float,
                                            check_positive_int, check_vectors)
 from tg_intrinsic.geometry.brdf import reflect, to_local
-from tg_intrinsic.geometry.envmap import check_envmap, equirect_lookup
+from tg_intrinsic.geometry.envmap import (check_envmap, equirect_lookup,
+                                          filter_envmap, irradiance)
 from tg_intrinsic.geometry.frames import check_frames
 from tg_intrinsic.geometry.sh import (fibonacci_sphere, fit_sh,
                                       num_coefficients, real_sh)
@@ -23,22 +24,18 @@ def light_directions(num_samples: int, dtype=torch.float64, device=None):
 
 
 def light_fit_matrix(directions, l_max: int, regularizer: float):
-    r"""The regularised least-squares operator :math:`(Y^\top Y + \lambda
-    \operatorname{diag}(e^l))^{-1} Y^\top`, :math:`(K, S)`, for light
-    samples at the same local directions at every point (so one solve
-    serves all points)."""
+    r"""The regularised, cosine-weighted least-squares operator
+    :math:`(Y^\top W Y + \lambda \operatorname{diag}(e^l))^{-1} Y^\top W`
+    with :math:`W = \max(0, \cos\theta)`, :math:`(K, S)`, the same for
+    every point. Only the upper hemisphere is fitted; the lower one is left
+    to the regulariser, which continues the light smoothly (cutting it to
+    zero at the horizon would ring through every degree instead)."""
     Y = real_sh(directions, l_max)
+    weights = directions[:, 2].clamp_min(0).unsqueeze(-1)
     l = torch.arange(l_max + 1, dtype=Y.dtype, device=Y.device)  # noqa: E741
     l = l.repeat_interleave(2 * l.long() + 1)
-    gram = Y.t() @ Y + regularizer * torch.diag(l.exp())
-    return torch.linalg.solve(gram, Y.t())
-
-
-def light_below_horizon_removed(light_radiance, directions):
-    """Zeroes the light from below the tangent plane: it cannot reach the
-    surface, and a fit that left that half free would make it up."""
-    return light_radiance * (directions[:, 2] > 0).to(
-        light_radiance.dtype).unsqueeze(-1)
+    gram = (Y * weights).t() @ Y + regularizer * torch.diag(l.exp())
+    return torch.linalg.solve(gram, (Y * weights).t())
 
 
 @functional_transform('fit_spherical_harmonics')
@@ -96,17 +93,16 @@ class FitSphericalHarmonics(BaseTransform):
           :math:`(1)`
     """
     def __init__(self, l_max: int = 5, regularizer: float = 1e-4,
-                 num_light_samples: int = None,
+                 num_light_samples: int = 1024,
                  prefilter_alpha: float = None):
         self.l_max = check_positive_int(l_max, 'l_max')
         self.regularizer = check_positive_float(regularizer, 'regularizer')
-        if num_light_samples is None:
-            num_light_samples = 4 * num_coefficients(l_max)
         self.num_light_samples = check_positive_int(num_light_samples,
                                                     'num_light_samples')
-        if num_coefficients(l_max) > num_light_samples:
-            raise ValueError(f"'num_light_samples' must be at least the "
-                             f"{num_coefficients(l_max)} coefficients, got "
+        if 4 * num_coefficients(l_max) > num_light_samples:
+            raise ValueError(f"'num_light_samples' must be at least "
+                             f"{4 * num_coefficients(l_max)} (4 per "
+                             f"coefficient) for l_max={l_max}, got "
                              f"{num_light_samples}")
         if prefilter_alpha is not None:
             prefilter_alpha = check_positive_float(prefilter_alpha,
@@ -115,7 +111,6 @@ class FitSphericalHarmonics(BaseTransform):
         self.prefilter_alpha = prefilter_alpha
 
     def forward(self, data: Data) -> Data:
-        from tg_intrinsic.geometry.envmap import filter_envmap, irradiance
         pos = check_points(data.pos, 'pos')
         normal = getattr(data, 'normal', None)
         if normal is None:
@@ -147,15 +142,15 @@ class FitSphericalHarmonics(BaseTransform):
 
         prefilter = self.prefilter_alpha
         if prefilter is None:
-            prefilter = 1 / math.sqrt(num_views)
+            prefilter = max(1 / math.sqrt(num_views), 1 / self.l_max)
         light = filter_envmap(envmap, prefilter) if prefilter > 0 else envmap
 
         # Incoming light at Fibonacci directions of every local frame.
         local = light_directions(self.num_light_samples, pos.dtype,
                                  pos.device)
         light_radiance = equirect_lookup(light, local @ frame)  # (N, S, 3)
-        fit = light_fit_matrix(local, self.l_max, self.regularizer)
-        sh_in = fit @ light_below_horizon_removed(light_radiance, local)
+        sh_in = light_fit_matrix(local, self.l_max, self.regularizer) \
+            @ light_radiance
 
         # Outgoing radiance as a function of the mirror direction.
         mask = mask.bool()
@@ -174,7 +169,7 @@ class FitSphericalHarmonics(BaseTransform):
         data.sh_in = sh_in
         data.sh_out = sh_out
         data.sh_in_obs = sh_in_obs
-        data.light_radiance = light_radiance
+        data.light_radiance = light_radiance.float()
         data.mirror_dir = mirror_local
         data.irradiance = irradiance(envmap, normal)
         data.sh_prefilter = torch.tensor([prefilter], dtype=pos.dtype,

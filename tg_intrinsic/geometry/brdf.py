@@ -124,6 +124,21 @@ def ggx_albedo(cos_out: Tensor, roughness: Tensor, r0: Tensor) -> Tensor:
     return r0.unsqueeze(1) * lerp(A).unsqueeze(-1) + lerp(B).unsqueeze(-1)
 
 
+def dominant_direction(mirror_dir: Tensor, roughness: Tensor) -> Tensor:
+    r"""Where a GGX lobe of the local mirror direction :math:`r`
+    :math:`(N, V, 3)` collects most light: :math:`r` pulled towards the
+    normal, :math:`\operatorname{normalize}(n + s (r - n))` with :math:`s =
+    (1 - \alpha)(\sqrt{1 - \alpha} + \alpha)` (Lagarde and de Rousiers,
+    "Moving Frostbite to PBR", 2014), :math:`\alpha = r^2` per point."""
+    alpha = roughness * roughness
+    lean = ((1 - alpha) * (torch.sqrt((1 - alpha).clamp_min(1e-6)) + alpha)
+            ).view(-1, 1, 1)
+    normal = torch.zeros_like(mirror_dir)
+    normal[..., 2] = 1
+    dominant = normal + lean * (mirror_dir - normal)
+    return dominant / dominant.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+
+
 def sh_reflectance(sh_in: Tensor, irradiance: Tensor, mirror_dir: Tensor,
                    base_color: Tensor, metallic: Tensor, roughness: Tensor,
                    prefilter_alpha: float = 0.0, fresnel: bool = True,
@@ -167,9 +182,9 @@ def sh_reflectance(sh_in: Tensor, irradiance: Tensor, mirror_dir: Tensor,
             :math:`n` by :math:`s = (1 - \alpha)(\sqrt{1 - \alpha} +
             \alpha)` (Lagarde and de Rousiers 2014), as rough GGX lobes
             lean towards the normal. (default: :obj:`'eq5.11'`)
-        basis_out (torch.Tensor, optional): Harmonics at
-            :obj:`mirror_dir`, if already computed (eq. 5.11 only).
-            (default: :obj:`None`)
+        basis_out (torch.Tensor, optional): Harmonics at :obj:`mirror_dir`
+            (eq. 5.11) or at the :func:`dominant_direction` (split sum), if
+            already computed. (default: :obj:`None`)
 
     Returns:
         :math:`(N, V, 3)`.
@@ -184,14 +199,10 @@ def sh_reflectance(sh_in: Tensor, irradiance: Tensor, mirror_dir: Tensor,
     cos_out = mirror_dir[..., 2]
     r0 = 0.04 + (base_color - 0.04) * metallic.unsqueeze(-1)
     if specular_model == 'split_sum':
-        lean = ((1 - alpha) * (torch.sqrt((1 - alpha).clamp_min(0)) + alpha)
-                ).view(-1, 1, 1)
-        normal = torch.zeros_like(mirror_dir)
-        normal[..., 2] = 1
-        dominant = normal + lean * (mirror_dir - normal)
-        dominant = dominant / dominant.norm(dim=-1, keepdim=True
-                                            ).clamp_min(1e-12)
-        specular = real_sh(dominant, l_max) @ coefficients
+        if basis_out is None:
+            basis_out = real_sh(dominant_direction(mirror_dir, roughness),
+                                l_max)
+        specular = basis_out @ coefficients
         specular = specular * ggx_albedo(cos_out, roughness, r0)
     else:
         if basis_out is None:

@@ -7,7 +7,8 @@ from torch.nn import Parameter
 from torch_geometric.data import Data
 
 from tg_intrinsic.geometry import knn, mesh_edges
-from tg_intrinsic.geometry.brdf import MIN_ALPHA, sh_reflectance
+from tg_intrinsic.geometry.brdf import (MIN_ALPHA, dominant_direction,
+                                        sh_reflectance)
 from tg_intrinsic.geometry.sh import real_sh, smith_g1
 from tg_intrinsic.geometry._checks import (check_choice,
                                            check_positive_float,
@@ -214,17 +215,18 @@ class FrequencySVBRDF(torch.nn.Module):
         target = target.to(data.sh_in.dtype)
         normaliser = 3 * weight.sum().clamp_min(1e-30)
         l_max = int(round(math.sqrt(data.sh_in.size(1)))) - 1
-        basis = real_sh(data.mirror_dir, l_max) \
-            if self.specular_model == 'eq5.11' else None
+        basis = self._basis(data, l_max)
         edges = self._graph(data, tv_k) if tv_weight > 0 else None
         optimizer = torch.optim.Adam(self.parameters(), lr=lr)
         history = []
         sh_in = data.sh_in
         for step in tqdm(range(steps), disable=not progress,
                          desc='FrequencySVBRDF'):
-            if self.shadowing and self.specular_model == 'eq5.11' \
-                    and step % shadowing_every == 0:
-                sh_in = self.shadowed_light(data)
+            if step % shadowing_every == 0:
+                if self.specular_model == 'split_sum':
+                    basis = self._basis(data, l_max)
+                elif self.shadowing:
+                    sh_in = self.shadowed_light(data)
             loss = (weight * (self(data, sh_in, basis) - target).abs()
                     ).sum() / normaliser
             if edges is not None:
@@ -248,6 +250,17 @@ class FrequencySVBRDF(torch.nn.Module):
             entropy=getattr(data, 'entropy', None),
             loss=history + [final], seconds=time.perf_counter() - start,
             texture_shape=self.texture_shape)
+
+    def _basis(self, data: Data, l_max: int) -> Tensor:
+        """Harmonics at the mirror directions (eq. 5.11) or at the lobes'
+        dominant directions (split sum), which move slowly with the
+        roughness and are refreshed like the shadowing, without a
+        gradient."""
+        direction = data.mirror_dir
+        if self.specular_model == 'split_sum':
+            direction = dominant_direction(direction, self.roughness.detach(
+            ).to(direction.dtype))
+        return real_sh(direction, l_max)
 
     def total_variation(self, edges: Tensor) -> Tensor:
         """Mean absolute difference of all parameters across edges."""

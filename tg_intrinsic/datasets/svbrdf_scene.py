@@ -11,11 +11,13 @@ from torch import Tensor
 from torch_geometric.data import Data
 
 from tg_intrinsic.geometry._checks import check_faces, check_points
-from tg_intrinsic.geometry.envmap import check_envmap, equirect_directions
+from tg_intrinsic.geometry.cameras import camera_centers
+from tg_intrinsic.geometry.envmap import check_envmap, sun_sky_envmap
 from tg_intrinsic.geometry.mesh import vertex_normals
-from tg_intrinsic.geometry.render import (camera_centers, point_visibility,
+from tg_intrinsic.geometry.render import (point_visibility,
                                           render_images as _render_images,
                                           render_radiance)
+from tg_intrinsic.io.hdr import read_envmap
 from tg_intrinsic.geometry.sh import fibonacci_sphere
 
 from ._common import check_int
@@ -158,30 +160,6 @@ def _normalise(pos):
     return pos / pos.norm(dim=1).max()
 
 
-def _sun_sky(height, width, sun_direction):
-    """A simple sky: a blue-to-white gradient above the horizon, a dim
-    ground, and a sun disc of 1.5 degrees radius carrying most of the
-    energy (used when :mod:`tg_intrinsic.geometry.envmap` has no
-    ``sun_sky_envmap``)."""
-    d = equirect_directions(height, width)
-    z = d[..., 2:]
-    zenith = torch.tensor([0.25, 0.45, 1.0], dtype=torch.float64)
-    horizon = torch.tensor([0.9, 0.9, 1.0], dtype=torch.float64)
-    ground = torch.tensor([0.15, 0.13, 0.1], dtype=torch.float64)
-    sky = torch.where(z > 0, horizon + (zenith - horizon) * z.clamp(0, 1)
-                      ** 0.5, ground)
-    cos = d @ sun_direction
-    radius = math.radians(1.5)
-    # at least one pixel lit, whatever the resolution
-    cos_edge = min(math.cos(radius), math.cos(1.5 * math.pi / height))
-    disc = (cos >= cos_edge).double()
-    solid = 2 * math.pi * (1 - cos_edge)
-    # the sun delivers ~ 8x the sky's irradiance at normal incidence
-    sun = disc[..., None] * (8 * math.pi / solid) * torch.tensor(
-        [1.0, 0.95, 0.85], dtype=torch.float64)
-    return (sky + sun).float()
-
-
 def _make_envmap(envmap, seed, envmap_size):
     if isinstance(envmap, Tensor):
         return check_envmap(envmap).float()
@@ -193,22 +171,12 @@ def _make_envmap(envmap, seed, envmap_size):
                             math.cos(elevation) * math.sin(azimuth),
                             math.sin(elevation)], dtype=torch.float64)
         height, width = envmap_size
-        try:
-            from tg_intrinsic.geometry.envmap import sun_sky_envmap
-        except ImportError:
-            return _sun_sky(height, width, sun)
         return check_envmap(sun_sky_envmap(height, width, sun)).float()
     if isinstance(envmap, (str, os.PathLike)):
         if not os.path.exists(envmap):
             raise ValueError(f"'envmap' must be 'sun_sky', an [H, W, 3] "
                              f"tensor or the path of an HDR image; "
                              f"{envmap!r} does not exist")
-        try:
-            from tg_intrinsic.io.hdr import read_envmap
-        except ImportError:
-            raise ValueError("reading an environment map from a file needs "
-                             "tg_intrinsic.io.hdr, which this installation "
-                             "lacks; pass the map as a tensor") from None
         return check_envmap(read_envmap(envmap)).float()
     raise ValueError(f"'envmap' must be 'sun_sky', an [H, W, 3] tensor or "
                      f"the path of an HDR image, got {type(envmap)}")

@@ -41,7 +41,8 @@ from torch import Tensor
 
 from ._checks import (check_faces, check_points, check_positive_float,
                       check_positive_int, check_tensor)
-from .envmap import check_envmap, equirect_lookup
+from .cameras import camera_centers
+from .envmap import check_envmap
 from .sh import principled_to_torrance_sparrow
 
 __all__ = ['render_radiance', 'rasterize', 'point_visibility',
@@ -1050,13 +1051,6 @@ def point_visibility(points: Tensor, vertices: Tensor, faces: Tensor,
                                        height, width, _to_camera(P, E[v]),
                                        rel_tol)
     return torch.from_numpy(out)
-
-
-def camera_centers(extrinsics: Tensor) -> Tensor:
-    r"""World positions :math:`-R^\top t` of cameras :math:`(V, 3, 4)`:
-    :math:`(V, 3)`."""
-    R, t = extrinsics[..., :3], extrinsics[..., 3:]
-    return -(R.transpose(-1, -2) @ t).squeeze(-1)
 
 
 def render_images(vertices: Tensor, faces: Tensor, vertex_normals: Tensor,

@@ -84,6 +84,27 @@ def test_forward_shapes_gradients_and_options():
     assert float(model.total_variation(edges)) < before
 
 
+def test_known_metallic_is_held():
+    data, (base, metallic, roughness) = self_consistent_data(150, 60)
+    data = SpectralUncertainty()(data)
+    model = FrequencySVBRDF(data.num_nodes)
+    start = model.fit(data, steps=0, metallic=1.0, progress=False)
+    # a metal's base colour is its specular reflectance
+    assert torch.allclose(start.base_color,
+                          data.init_specular.float().clamp(0, 1))
+    result = model.fit(data, steps=200, lr=0.02, metallic=1.0,
+                       progress=False)
+    assert bool((result.metallic == 1).all())
+    free = FrequencySVBRDF(data.num_nodes).fit(data, steps=200, lr=0.02,
+                                               progress=False)
+    error = ((result.base_color - base) ** 2).mean().sqrt()
+    assert error < 0.02
+    assert error <= ((free.base_color - base) ** 2).mean().sqrt() + 1e-3
+    constant = FrequencySVBRDF(data.num_nodes).fit(
+        data, steps=3, init='constant', metallic=0.0, progress=False)
+    assert bool((constant.metallic == 0).all())
+
+
 def test_texels_and_export(tmp_path):
     data, _ = self_consistent_data(64, 12)
     model = FrequencySVBRDF(64, texture_shape=(8, 8))
@@ -119,6 +140,8 @@ def test_bad_input():
         FrequencySVBRDF(30, texture_shape=(4, 4))
     with pytest.raises(ValueError, match='steps'):
         FrequencySVBRDF(30).fit(data, steps=-1, progress=False)
+    with pytest.raises(ValueError, match="'metallic' must be None"):
+        FrequencySVBRDF(30).fit(data, metallic=1.5, progress=False)
     broken = data.clone()
     broken.obs_radiance = broken.obs_radiance.clone()
     broken.obs_radiance[0, 0, 0] = math.nan

@@ -347,6 +347,12 @@ def _grid_cpu(cross, square, const, ks2, scale):
 _NEGLIGIBLE = 50.0
 
 
+@numba.njit(inline='always', fastmath=True, cache=True)
+def _distance(const, cross, square, u):  # pragma: no cover (numba)
+    """D of eq. 5.19 at K_s^2 = u, clamped at 0 against rounding."""
+    return max(const - 2 * u * cross + u * u * square, 0.0)
+
+
 @numba.njit(parallel=True, fastmath=True, cache=True)
 def _grid_kernel(cross, square, const, ks2, scale, entropy, p_best, r_index,
                  ks_index):  # pragma: no cover (numba)
@@ -363,16 +369,16 @@ def _grid_kernel(cross, square, const, ks2, scale, entropy, p_best, r_index,
             for k in range(num_ks):
                 u = ks2[k]
                 for a in range(num_r):
-                    d = max(const[i, c] - 2 * u * cross[i, c, a]
-                            + u * u * square[i, c, a], 0.0)
+                    d = _distance(const[i, c], cross[i, c, a],
+                                  square[i, c, a], u)
                     d_min = min(d_min, d)
             z = 0.0
             s = 0.0
             for k in range(num_ks):
                 u = ks2[k]
                 for a in range(num_r):
-                    d = max(const[i, c] - 2 * u * cross[i, c, a]
-                            + u * u * square[i, c, a], 0.0)
+                    d = _distance(const[i, c], cross[i, c, a],
+                                  square[i, c, a], u)
                     x = (d - d_min) * scale
                     if x < _NEGLIGIBLE:  # e^{-x} below 1e-22 adds nothing
                         e = np.exp(-x)
@@ -389,8 +395,8 @@ def _grid_kernel(cross, square, const, ks2, scale, entropy, p_best, r_index,
         for k in range(num_ks):
             u = ks2[k]
             for a in range(num_r):
-                d = max(const[i, c] - 2 * u * cross[i, c, a]
-                        + u * u * square[i, c, a], 0.0)
+                d = _distance(const[i, c], cross[i, c, a], square[i, c, a],
+                              u)
                 x = (d - best_min) * scale
                 p = np.exp(-x) / best_z if x < _NEGLIGIBLE else 0.0
                 p_best[i, k, a] = p

@@ -469,7 +469,7 @@ def _specular_kernel(normal, r0, alpha, view, mask, env, num_brdf,
 
 
 # ------------------------------------------------------------ validation
-def _check_unit_rows(value, name, shape):
+def _check_float(value, name, shape):
     value = check_tensor(value, name)
     if tuple(value.shape) != tuple(shape):
         raise ValueError(f"'{name}' must have shape {list(shape)}, got "
@@ -480,6 +480,11 @@ def _check_unit_rows(value, name, shape):
     if value.numel() and not bool(torch.isfinite(value).all()):
         raise ValueError(f"'{name}' contains NaN or infinite values; "
                          f"repair those rows first")
+    return value
+
+
+def _check_unit_rows(value, name, shape):
+    value = _check_float(value, name, shape)
     norm = value.double().norm(dim=-1, keepdim=True)
     if value.numel() and bool((norm <= 1e-12).any()):
         raise ValueError(f"'{name}' has zero-length direction(s); every "
@@ -488,15 +493,7 @@ def _check_unit_rows(value, name, shape):
 
 
 def _check_unit_interval(value, name, shape):
-    value = check_tensor(value, name)
-    if tuple(value.shape) != tuple(shape):
-        raise ValueError(f"'{name}' must have shape {list(shape)}, got "
-                         f"{list(value.shape)}")
-    if not value.is_floating_point():
-        raise ValueError(f"'{name}' must be a float tensor, got "
-                         f"{value.dtype}")
-    if value.numel() and not bool(torch.isfinite(value).all()):
-        raise ValueError(f"'{name}' contains NaN or infinite values")
+    value = _check_float(value, name, shape)
     if value.numel() and bool(((value < 0) | (value > 1)).any()):
         raise ValueError(f"'{name}' must lie in [0, 1], got values in "
                          f"[{float(value.min()):g}, {float(value.max()):g}]"

@@ -1,5 +1,6 @@
 import math
 import time
+from typing import Optional
 
 import torch
 from torch import Tensor
@@ -94,15 +95,24 @@ class FrequencySVBRDF(torch.nn.Module):
                 p.fill_(0.5)
 
     @torch.no_grad()
-    def initialize(self, data: Data):
-        """Starts from the argmax of the spectrum grid search
-        (``init_base_color``, ``init_metallic``, ``init_roughness``)."""
+    def initialize(self, data: Data, metallic: Optional[float] = None):
+        r"""Starts from the argmax of the spectrum grid search
+        (``init_base_color``, ``init_metallic``, ``init_roughness``). With a
+        known :obj:`metallic` :math:`m > 0`, the base colour follows from
+        the specular reflectance instead, :math:`b = (K_s - 0.04 (1 - m)) /
+        m`."""
         for name in ('base_color', 'metallic', 'roughness'):
             value = getattr(data, f'init_{name}', None)
             if value is None:
                 raise ValueError(f"'data.init_{name}' is missing; run "
                                  f"SpectralUncertainty first")
             getattr(self, name).copy_(value)
+        if metallic is not None:
+            self.metallic.fill_(metallic)
+            specular = getattr(data, 'init_specular', None)
+            if metallic > 0 and specular is not None:
+                self.base_color.copy_((specular - 0.04 * (1 - metallic))
+                                      / metallic)
         self.clamp_()
 
     @torch.no_grad()
@@ -150,6 +160,7 @@ class FrequencySVBRDF(torch.nn.Module):
     def fit(self, data: Data, steps: int = 200, lr: float = 0.01,
             init: str = 'spectrum', shadowing_every: int = 50,
             tv_weight: float = 0.0, tv_k: int = 8,
+            metallic: Optional[float] = None,
             progress: bool = True) -> SVBRDFResult:
         r"""Recovers the parameters from the observations.
 
@@ -173,6 +184,11 @@ class FrequencySVBRDF(torch.nn.Module):
                 :obj:`0.0`)
             tv_k (int, optional): Neighbours of that graph for point
                 clouds. (default: :obj:`8`)
+            metallic (float, optional): Holds the metallic map at this
+                value instead of fitting it, for captures whose material
+                class is known (1 for metals, 0 for dielectrics): it
+                removes the diffuse / specular ambiguity that otherwise
+                leaks into the base colour. (default: :obj:`None`)
             progress (bool, optional): Show a progress bar.
                 (default: :obj:`True`)
 
@@ -189,6 +205,10 @@ class FrequencySVBRDF(torch.nn.Module):
         if init not in ('spectrum', 'constant'):
             raise ValueError(f"'init' must be 'spectrum' or 'constant', got "
                              f"{init!r}")
+        if metallic is not None and not (isinstance(metallic, (int, float))
+                                         and 0 <= metallic <= 1):
+            raise ValueError(f"'metallic' must be None (fitted) or a number "
+                             f"in [0, 1], got {metallic!r}")
         self._check(data)
         observed = data.obs_radiance[data.obs_mask.bool()]
         if not bool(torch.isfinite(observed).all()):
@@ -203,9 +223,12 @@ class FrequencySVBRDF(torch.nn.Module):
                 SpectralUncertainty
             data = SpectralUncertainty(store_likelihood=False)(data)
         if init == 'spectrum':
-            self.initialize(data)
+            self.initialize(data, metallic)
         else:
             self.reset_parameters()
+            if metallic is not None:
+                with torch.no_grad():
+                    self.metallic.fill_(metallic)
         device = data.sh_in.device
         self.to(device)
         mask = data.obs_mask.bool()
@@ -217,7 +240,10 @@ class FrequencySVBRDF(torch.nn.Module):
         l_max = int(round(math.sqrt(data.sh_in.size(1)))) - 1
         basis = self._basis(data, l_max)
         edges = self._graph(data, tv_k) if tv_weight > 0 else None
-        optimizer = torch.optim.Adam(self.parameters(), lr=lr)
+        fitted = [self.base_color, self.roughness]
+        if metallic is None:
+            fitted.append(self.metallic)
+        optimizer = torch.optim.Adam(fitted, lr=lr)
         history = []
         sh_in = data.sh_in
         for step in tqdm(range(steps), disable=not progress,
@@ -235,7 +261,7 @@ class FrequencySVBRDF(torch.nn.Module):
                 raise RuntimeError(f"the loss became {float(loss)} at step "
                                    f"{step}; check the observations for "
                                    f"NaN/inf radiance or lower 'lr'")
-            optimizer.zero_grad()
+            self.zero_grad()
             loss.backward()
             optimizer.step()
             self.clamp_()

@@ -26,6 +26,11 @@ extras_require = {
     'heat': ['potpourri3d>=1.0'],
     # Optional compiled scatter kernels; results must not change with it.
     'scatter': ['torch-scatter'],
+    # read_exr; Radiance .hdr needs nothing extra.
+    'exr': ['OpenEXR>=3.2'],
+    # The external renderer of the SVBRDF oracle test and benchmark
+    # (its llvm variant also needs: apt-get install libllvm19).
+    'mitsuba': ['mitsuba>=3.5'],
 }
 
 setup(

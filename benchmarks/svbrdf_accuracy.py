@@ -8,7 +8,8 @@ multiple importance sampled over the environment map), seen by 10, 25, 50
 and 100 cameras, under each HDR map in ``../shared/data/envmaps``
 (area-downsampled to 128 x 256) and a procedural sun + sky.
 
-Methods (all on the same observations):
+Methods (all on the same observations), and ``constant 0.5`` (grey, half
+metallic, roughness 0.5 everywhere: the baseline a recovery must beat):
 
 - ``spectrum``: the grid search on power spectra alone (eq. 5.19; l* = 5),
   maps from its argmax.
@@ -63,7 +64,7 @@ from tg_intrinsic.utils import machine_info  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ENVMAPS = os.path.join(HERE, '..', '..', 'shared', 'data', 'envmaps')
-METHODS = ('spectrum', 'mixed', 'mixed+spectrum', 'split_sum+spectrum',
+METHODS = ('constant 0.5', 'spectrum', 'mixed', 'mixed+spectrum', 'split_sum+spectrum',
            'mixed+spectrum, metal known', 'split_sum+spectrum, metal known')
 GOALS = {'roughness_mae': 0.05, 'base_color_rmse': 0.03}
 
@@ -128,7 +129,11 @@ def run_one(data, envmap_name, views, heldout, heldout_truth, steps):
         prepared[l_max].prep_seconds = time.perf_counter() - start
     for method in METHODS:
         prep = prepared[8 if method.startswith('split_sum') else 5]
-        if method == 'spectrum':
+        if method == 'constant 0.5':  # the baseline every map must beat
+            half = torch.full((data.num_nodes, ), 0.5, dtype=torch.float64)
+            maps = (half[:, None].expand(-1, 3), half, half)
+            seconds = 0.0
+        elif method == 'spectrum':
             maps = (prep.init_base_color, prep.init_metallic,
                     prep.init_roughness)
             seconds = prep.prep_seconds
@@ -176,8 +181,8 @@ def plot(rows, envmaps, view_counts, path):
                            (axes[1], 'base_color_rmse', 'base colour RMSE'),
                            (axes[2], 'relight_psnr',
                             'relighting PSNR (dB), held-out light')):
-        for method, style in zip(METHODS, ('o:', 's--', '^-', 'D-', 'v-.',
-                                           'P-.')):
+        for method, style in zip(METHODS, ('k:', 'o:', 's--', '^-', 'D-',
+                                           'v-.', 'P-.')):
             mean = [sum(r[key] for r in rows if r['method'] == method
                         and r['views'] == v) / len(envmaps)
                     for v in view_counts]
@@ -236,7 +241,8 @@ def main():
                         'spearman_entropy_roughness_error')}
     goals = {key: {'goal': value, 'met_by': [
         f"{r['method']} / {r['envmap']} / {r['views']} views" for r in rows
-        if r['method'] != 'spectrum' and r[key] <= value]}
+        if r['method'] not in ('spectrum', 'constant 0.5')
+        and r[key] <= value]}
         for key, value in GOALS.items()}
     os.makedirs(args.out, exist_ok=True)
     atomic_write_json(os.path.join(args.out, 'svbrdf_accuracy.json'), {

@@ -194,8 +194,8 @@ def main():
         envmaps['potsdamer_platz'] = downsample_envmap(env, env.size(0) // 64)
     size = (args.image_size, args.image_size)
     captures = {}
-    # ours first for every map: drjit's thread pool, once it has run an
-    # optimisation, slowed torch down several-fold in the same process
+    # ours first for every map, so that drjit's worker threads (alive once
+    # an optimisation has run) never compete with torch's in our timings
     for name, envmap in envmaps.items():
         data = svbrdf_scene('sphere', num_views=args.views, image_size=size,
                             materials='metals', roughness_range=(0.2, 0.8),

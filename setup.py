@@ -21,6 +21,9 @@ extras_require = {
         'hypothesis>=6.80',
         'robust-laplacian>=0.2.7',
         'potpourri3d>=1.0',
+        # independent oracles of the HDR readers (tests/io)
+        'opencv-python-headless>=4.8',
+        'OpenEXR>=3.2',
     ],
     # log_map(method='vector_heat'): geometry-central's vector heat method.
     'heat': ['potpourri3d>=1.0'],

@@ -34,7 +34,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from svbrdf_accuracy import load_envmaps  # noqa: E402
 from tg_intrinsic.datasets import svbrdf_scene  # noqa: E402
 from tg_intrinsic.geometry.brdf import (MIN_ALPHA,  # noqa: E402
-                                        ggx_albedo)
+                                        dominant_direction, ggx_albedo)
 from tg_intrinsic.geometry.envmap import (equirect_directions,  # noqa: E402
                                           equirect_solid_angles)
 from tg_intrinsic.nn import FrequencySVBRDF  # noqa: E402
@@ -46,20 +46,23 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 BINS = ((0.2, 0.35), (0.35, 0.5), (0.5, 0.65), (0.65, 0.8))
 
 
-def sh_model(data, l_max, specular_model):
-    prepared = FitSphericalHarmonics(l_max=l_max)(data.clone())
-    model = FrequencySVBRDF(data.num_nodes,
+def sh_model(prepared, specular_model):
+    """The model's radiance with the true parameters of ``prepared``."""
+    l_max = int(round(math.sqrt(prepared.sh_in.size(1)))) - 1
+    model = FrequencySVBRDF(prepared.num_nodes,
                             specular_model=specular_model).double()
     with torch.no_grad():
-        model.base_color.copy_(data.base_color)
-        model.metallic.copy_(data.metallic)
-        model.roughness.copy_(data.roughness)
+        model.base_color.copy_(prepared.base_color)
+        model.metallic.copy_(prepared.metallic)
+        model.roughness.copy_(prepared.roughness)
         sh_in = (model.shadowed_light(prepared)
                  if specular_model == 'eq5.11' else prepared.sh_in)
         return model(prepared, sh_in, model._basis(prepared, l_max))
 
 
-def exact_split_sum(data, envmap, chunk=256):
+def exact_split_sum(data, prepared, envmap, chunk=256):
+    """``prepared``: ``data`` after FitSphericalHarmonics (local frames and
+    mirror directions)."""
     height, width = envmap.shape[:2]
     light_dirs = equirect_directions(height, width).reshape(-1, 3).double()
     solid_angle = equirect_solid_angles(height, width).double()
@@ -67,14 +70,10 @@ def exact_split_sum(data, envmap, chunk=256):
     solid_angle = solid_angle.reshape(-1)
     radiance = envmap.reshape(-1, 3).double()
     normal = data.normal.double()
-    view = data.obs_dir.double()
     roughness = data.roughness.double()
     alpha = (roughness * roughness).clamp_min(MIN_ALPHA)
-    cos_out = (view * normal[:, None]).sum(-1)
-    mirror = 2 * cos_out.unsqueeze(-1) * normal[:, None] - view
-    lean = ((1 - alpha) * (torch.sqrt(1 - alpha) + alpha)).view(-1, 1, 1)
-    dominant = normal[:, None] + lean * (mirror - normal[:, None])
-    dominant = dominant / dominant.norm(dim=-1, keepdim=True)
+    mirror = prepared.mirror_dir.double()  # local: z is the normal
+    dominant = dominant_direction(mirror, roughness) @ prepared.frame.double()
     point, view_index = data.obs_mask.nonzero(as_tuple=True)
     prefiltered = torch.empty(point.numel(), 3, dtype=torch.float64)
     for start in range(0, point.numel(), chunk):
@@ -90,8 +89,8 @@ def exact_split_sum(data, envmap, chunk=256):
             * solid_angle
         prefiltered[rows] = (weight @ radiance) / weight.sum(
             1, keepdim=True).clamp_min(1e-30)
-    albedo = ggx_albedo(cos_out, roughness, data.base_color.double())
-    out = torch.zeros_like(view)
+    albedo = ggx_albedo(mirror[..., 2], roughness, data.base_color.double())
+    out = torch.zeros_like(mirror)
     out[point, view_index] = prefiltered * albedo[point, view_index]
     return out
 
@@ -115,10 +114,13 @@ def main():
                             roughness_range=(0.2, 0.8), resolution=3,
                             render_images=False, dtype=torch.float64,
                             envmap=envmap, seed=1)
-        models = {'eq5.11, l*=5': sh_model(data, 5, 'eq5.11'),
-                  'split_sum, l*=8': sh_model(data, 8, 'split_sum'),
-                  'split_sum, l*=12': sh_model(data, 12, 'split_sum'),
-                  'exact split sum': exact_split_sum(data, envmap)}
+        prepared = {l_max: FitSphericalHarmonics(l_max=l_max)(data.clone())
+                    for l_max in (5, 8, 12)}
+        models = {'eq5.11, l*=5': sh_model(prepared[5], 'eq5.11'),
+                  'split_sum, l*=8': sh_model(prepared[8], 'split_sum'),
+                  'split_sum, l*=12': sh_model(prepared[12], 'split_sum'),
+                  'exact split sum': exact_split_sum(data, prepared[8],
+                                                     envmap)}
         for model, prediction in models.items():
             errors = binned_error(prediction, data)
             rows.append({'envmap': name, 'model': model,

@@ -29,7 +29,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), '..'))
 from tg_intrinsic.geometry.brdf import (lobe_filter, observed_spectra,  # noqa
                                         spectral_grid, spectral_uncertainty)
 from tg_intrinsic.geometry.sh import fit_sh, real_sh  # noqa: E402
-from tg_intrinsic.utils import atomic_write_json, machine_info  # noqa: E402
+from tg_intrinsic.utils import (_atomic, atomic_write_json,  # noqa: E402
+                                machine_info)
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'results')
 L_MAX = 5
@@ -162,7 +163,6 @@ def main():
         ax.set_title(title, fontsize=9)
         ax.legend()
     fig.tight_layout()
-    from tg_intrinsic.utils import _atomic
     _atomic(os.path.join(RESULTS, 'svbrdf_speed.png'),
             lambda f: fig.savefig(f, format='png', dpi=120), 'wb')
 

@@ -64,8 +64,9 @@ from tg_intrinsic.utils import machine_info  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ENVMAPS = os.path.join(HERE, '..', '..', 'shared', 'data', 'envmaps')
-METHODS = ('constant 0.5', 'spectrum', 'mixed', 'mixed+spectrum', 'split_sum+spectrum',
-           'mixed+spectrum, metal known', 'split_sum+spectrum, metal known')
+METHODS = ('constant 0.5', 'spectrum', 'mixed', 'mixed+spectrum',
+           'split_sum+spectrum', 'mixed+spectrum, metal known',
+           'split_sum+spectrum, metal known')
 GOALS = {'roughness_mae': 0.05, 'base_color_rmse': 0.03}
 
 

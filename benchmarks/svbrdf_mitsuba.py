@@ -52,6 +52,8 @@ from mitsuba_scene import build_scene  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ENVMAPS = os.path.join(HERE, '..', '..', 'shared', 'data', 'envmaps')
+
+
 def errors(data, base_color, roughness):
     base_color = torch.as_tensor(np.asarray(base_color)).double().reshape(
         -1, 3)

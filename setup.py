@@ -47,5 +47,8 @@ setup(
     packages=find_packages(include=['tg_intrinsic', 'tg_intrinsic.*']),
     install_requires=install_requires,
     extras_require=extras_require,
+    entry_points={
+        'console_scripts': ['tg-intrinsic = tg_intrinsic.cli:entry_point'],
+    },
     license='MIT',
 )

@@ -48,7 +48,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), '..'))
 from tg_intrinsic.datasets import svbrdf_scene  # noqa: E402
-from tg_intrinsic.datasets.svbrdf_scene import look_at_cameras  # noqa
+from tg_intrinsic.geometry.cameras import look_at_cameras  # noqa
 from tg_intrinsic.geometry.cameras import camera_centers  # noqa: E402
 from tg_intrinsic.geometry.envmap import (downsample_envmap,  # noqa: E402
                                           sun_sky_envmap)

@@ -14,7 +14,8 @@ Examples::
 
 Writes to ``--out``: ``checkpoint.pt`` (model, optimiser, schedule, history;
 written atomically at every evaluation, so ``--resume`` continues an
-interrupted run), ``metrics.json`` and ``learning_curve.png``.
+interrupted run), ``metrics.json``, ``metrics.csv`` (one row per epoch) and
+``learning_curve.png``.
 """
 import argparse
 import hashlib
@@ -30,7 +31,9 @@ from torch_geometric.transforms import (Compose, NormalizeScale, RandomScale,
                                         SamplePoints)
 from tqdm import tqdm
 
-from tg_intrinsic.utils import atomic_torch_save, atomic_write_json
+from tg_intrinsic.io.figures import save_figure
+from tg_intrinsic.utils import (atomic_torch_save, atomic_write,
+                                atomic_write_json)
 
 DATASETS = ('synthetic_modelnet', 'synthetic_shrec', 'mesh_folder')
 MODELS = ('deltanet', 'hsn')
@@ -166,12 +169,35 @@ def evaluate(model, loader, device) -> float:
     return correct / max(total, 1)
 
 
+CSV_COLUMNS = ('epoch', 'train_loss', 'train_accuracy', 'test_accuracy',
+               'seconds')
+
+
+def write_metrics_csv(history: List[Dict], path: str):
+    """One row per epoch (``test_accuracy`` empty between evaluations),
+    rewritten atomically after every epoch."""
+    import csv
+    import io
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, CSV_COLUMNS, extrasaction='ignore',
+                            lineterminator='\n')
+    writer.writeheader()
+    for record in history:
+        writer.writerow({k: '' if record.get(k) is None else record[k]
+                         for k in CSV_COLUMNS})
+    atomic_write(path, lambda f: f.write(buffer.getvalue()), 'w')
+
+
 def plot_history(history: List[Dict], path: str, title: str):
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
     epochs = [h['epoch'] for h in history]
     fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+    for axis in ax:
+        axis.xaxis.set_major_locator(MaxNLocator(integer=True))
+        axis.grid(alpha=0.3)
     ax[0].plot(epochs, [h['train_loss'] for h in history])
     ax[0].set_xlabel('epoch')
     ax[0].set_ylabel('training loss')
@@ -183,12 +209,11 @@ def plot_history(history: List[Dict], path: str, title: str):
     ax[1].set_ylabel('accuracy')
     ax[1].set_ylim(0, 1)
     ax[1].legend()
+    ax[0].set_title('training loss')
+    ax[1].set_title('accuracy')
     fig.suptitle(title)
     fig.tight_layout()
-    tmp = path + '.tmp.png'
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    os.replace(tmp, path)
+    save_figure(fig, path)
 
 
 def train(args) -> Dict:
@@ -277,6 +302,7 @@ def train(args) -> Dict:
         if epoch % args.eval_every == 0 or epoch == args.epochs:
             record['test_accuracy'] = evaluate(model, test_loader, device)
         history.append(record)
+        write_metrics_csv(history, os.path.join(args.out, 'metrics.csv'))
         if record['test_accuracy'] is not None:
             print(f"epoch {epoch}: loss {record['train_loss']:.3f}, "
                   f"train {record['train_accuracy']:.3f}, "
@@ -313,21 +339,23 @@ class _Mapped(torch.utils.data.Dataset):
         return self.transform(self.items[index])
 
 
-def parse_args(argv=None):
-    parser = argparse.ArgumentParser(
-        description='Train a tg_intrinsic classification network.')
-    parser.add_argument('--model', default='deltanet', choices=MODELS)
+def add_arguments(parser, model_and_dataset: bool = True):
+    """The training options, shared by ``python -m tg_intrinsic.train``
+    and ``tg-intrinsic train`` (which names the model and data set its own
+    way: ``model_and_dataset=False``)."""
+    if model_and_dataset:
+        parser.add_argument('--model', default='deltanet', choices=MODELS)
+        parser.add_argument('--dataset', default='synthetic_modelnet',
+                            choices=DATASETS)
+        parser.add_argument('--mesh-root', default=None,
+                            help='root/<class>/<split>/*.off|obj|ply for '
+                            'mesh_folder')
     parser.add_argument('--task', default='classification',
                         choices=['classification', 'segmentation'],
                         help='segmentation: per-vertex parts (hsn on '
                         'synthetic_shrec)')
-    parser.add_argument('--dataset', default='synthetic_modelnet',
-                        choices=DATASETS)
     parser.add_argument('--root', default='data',
                         help='cache folder of the synthetic data sets')
-    parser.add_argument('--mesh-root', default=None,
-                        help='root/<class>/<split>/*.off|obj|ply for '
-                        'mesh_folder')
     parser.add_argument('--out', default=None,
                         help='output folder (default: runs/<model>_<dataset>)')
     parser.add_argument('--num-points', type=int, default=1024)
@@ -368,17 +396,44 @@ def parse_args(argv=None):
     parser.add_argument('--device', default='auto')
     parser.add_argument('--threads', type=int, default=0)
     parser.add_argument('--resume', action='store_true')
-    parser.add_argument('--quiet', action='store_true',
-                        help='no progress bar')
-    args = parser.parse_args(argv)
+    if model_and_dataset:
+        parser.add_argument('--quiet', action='store_true',
+                            help='no progress bar')
+
+
+def check_arguments(args, parser):
+    """Fills the default output folder and rejects values no run can use
+    (through ``parser.error``: one line, exit code 2)."""
     if args.out is None:
         args.out = os.path.join('runs', f'{args.model}_{args.dataset}')
-    for name in ('num_points', 'epochs', 'batch_size', 'eval_every', 'k'):
+    for name in ('num_points', 'epochs', 'batch_size', 'eval_every', 'k',
+                 'rings'):
         if getattr(args, name) < 1:
-            parser.error(f"--{name.replace('_', '-')} must be at least 1")
+            parser.error(f"--{name.replace('_', '-')} must be at least 1, "
+                         f"got {getattr(args, name)}")
+    for name in ('lr', 'radius'):
+        if not getattr(args, name) > 0:
+            parser.error(f"--{name} must be positive, got "
+                         f"{getattr(args, name)}")
+    for name in ('weight_decay', 'label_smoothing', 'max_order', 'threads'):
+        if getattr(args, name) < 0:
+            parser.error(f"--{name.replace('_', '-')} must not be negative, "
+                         f"got {getattr(args, name)}")
+    if args.shapes_per_class is not None and args.shapes_per_class < 1:
+        parser.error(f"--shapes-per-class must be at least 1, got "
+                     f"{args.shapes_per_class}")
+    if min(args.conv_channels + args.hsn_channels) < 1:
+        parser.error("channel counts must be at least 1")
     if args.task == 'segmentation' and args.model != 'hsn':
         parser.error("--task segmentation is available with --model hsn")
     return args
+
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(
+        description='Train a tg_intrinsic classification network.')
+    add_arguments(parser)
+    return check_arguments(parser.parse_args(argv), parser)
 
 
 def main(argv=None):

@@ -9,7 +9,10 @@ from typing import Any
 import torch
 
 
-def _atomic(path: str, write, mode: str):
+def atomic_write(path: str, write, mode: str):
+    """Calls ``write(f)`` on a temporary file beside ``path`` (opened with
+    ``mode``) and renames it onto ``path``: readers see the old file or the
+    whole new one, never a part."""
     folder = os.path.dirname(os.path.abspath(path))
     os.makedirs(folder, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=folder, prefix='.tmp-',
@@ -30,12 +33,12 @@ def _atomic(path: str, write, mode: str):
 
 def atomic_write_json(path: str, obj: Any):
     """Writes ``obj`` as indented JSON to ``path`` atomically."""
-    _atomic(path, lambda f: json.dump(obj, f, indent=2, sort_keys=False), 'w')
+    atomic_write(path, lambda f: json.dump(obj, f, indent=2, sort_keys=False), 'w')
 
 
 def atomic_torch_save(obj: Any, path: str):
     """``torch.save`` that never leaves a truncated file behind."""
-    _atomic(path, lambda f: torch.save(obj, f), 'wb')
+    atomic_write(path, lambda f: torch.save(obj, f), 'wb')
 
 
 def machine_info() -> dict:

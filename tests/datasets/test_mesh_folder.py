@@ -8,7 +8,7 @@ from torch_geometric.loader import DataLoader
 
 from tg_intrinsic import IntrinsicData
 from tg_intrinsic.datasets import MeshFolder
-from tg_intrinsic.datasets import mesh_folder as mf
+from tg_intrinsic.io import mesh as mf
 
 TET_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.5]])
 TET_F = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])

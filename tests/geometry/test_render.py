@@ -222,7 +222,7 @@ def test_render_radiance_bad_input():
 
 # ---------------------------------------------------------- rasteriser
 def camera(eye, target=(0, 0, 0), focal=40.0, size=(40, 48)):
-    from tg_intrinsic.datasets.svbrdf_scene import look_at_cameras
+    from tg_intrinsic.geometry.cameras import look_at_cameras
     fov = 2 * math.degrees(math.atan(size[0] / 2 / focal))
     K, E = look_at_cameras(torch.tensor([eye], dtype=D64), target, fov,
                            size)

@@ -11,6 +11,7 @@ from tqdm.auto import tqdm
 
 from tg_intrinsic.data import IntrinsicData
 
+from tg_intrinsic.io.mesh import read_mesh
 from tg_intrinsic.utils import atomic_write_json
 
 from ._common import check_split, save_atomic
@@ -159,89 +160,3 @@ class MeshFolder(InMemoryDataset):
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}({len(self)}, split={self.split!r},'
                 f' num_classes={self.num_classes})')
-
-
-# ------------------------------------------------------------------ readers
-
-
-def read_mesh(path: str) -> Tuple[np.ndarray, np.ndarray]:
-    """Reads a triangle mesh: ``(pos [N, 3] float64, face [F, 3] int64)``.
-
-    Raises a :class:`ValueError` that names the file if it cannot be read
-    or holds no valid triangles.
-    """
-    ext = osp.splitext(path)[1].lower()
-    try:
-        if ext == '.off':
-            pos, face = read_off(path)
-        else:
-            import trimesh
-            kwargs = dict(maintain_order=True, skip_materials=True) \
-                if ext == '.obj' else {}
-            mesh = trimesh.load(path, process=False, force='mesh', **kwargs)
-            pos = np.asarray(mesh.vertices, dtype=np.float64)
-            face = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
-    except Exception as e:  # noqa: BLE001 - re-raised with the file name
-        raise ValueError(f"MeshFolder: could not read mesh file '{path}': "
-                         f"{type(e).__name__}: {e}") from e
-    if pos.ndim != 2 or pos.shape[1] != 3 or len(pos) == 0:
-        raise ValueError(f"MeshFolder: mesh file '{path}' has no vertices")
-    if len(face) == 0:
-        raise ValueError(f"MeshFolder: mesh file '{path}' has no triangles")
-    if not np.isfinite(pos).all():
-        raise ValueError(f"MeshFolder: mesh file '{path}' has NaN or "
-                         f"infinite vertex coordinates")
-    if face.min() < 0 or face.max() >= len(pos):
-        raise ValueError(f"MeshFolder: mesh file '{path}' has face indices "
-                         f"outside [0, {len(pos) - 1}]")
-    return pos, face
-
-
-def read_off(path: str) -> Tuple[np.ndarray, np.ndarray]:
-    """Reads an OFF file (also ``COFF``/``NOFF`` with extra columns, and
-    ModelNet's ``OFF<nv> <nf> <ne>`` single-line header). Polygons are
-    split into triangle fans."""
-    with open(path, 'r', errors='replace') as f:
-        lines = [ln.split('#', 1)[0].strip() for ln in f]
-    lines = [ln for ln in lines if ln]
-    if not lines:
-        raise ValueError('empty file')
-    head = lines[0]
-    keyword = head.split()[0]
-    if not keyword.upper().lstrip('CN').startswith('OFF'):
-        raise ValueError(f"missing 'OFF' header (first line: {head[:40]!r})")
-    rest = head[head.upper().index('OFF') + 3:].split()
-    i = 1
-    if not rest:  # counts on the next line
-        rest = lines[1].split()
-        i = 2
-    try:
-        nv, nf = int(rest[0]), int(rest[1])
-    except (IndexError, ValueError):
-        raise ValueError(f'malformed OFF header {head!r}') from None
-    if len(lines) < i + nv + nf:
-        raise ValueError(f'OFF header announces {nv} vertices and {nf} faces '
-                         f'but the file has only {len(lines) - i} data lines')
-    vlines = lines[i:i + nv]
-    try:
-        pos = np.array([ln.split()[:3] for ln in vlines], dtype=np.float64)
-    except ValueError:
-        raise ValueError('malformed vertex line') from None
-    if pos.shape != (nv, 3):
-        raise ValueError('every vertex line needs 3 coordinates')
-    ftok = [ln.split() for ln in lines[i + nv:i + nv + nf]]
-    try:
-        if all(len(t) >= 4 and t[0] == '3' for t in ftok):  # all triangles
-            return pos, np.array([t[1:4] for t in ftok],
-                                 dtype=np.int64).reshape(-1, 3)
-        tris = []
-        for tok in ftok:
-            k = int(tok[0])
-            if k < 3 or len(tok) < k + 1:
-                raise ValueError(f"malformed face line {' '.join(tok)[:40]!r}")
-            idx = [int(t) for t in tok[1:k + 1]]
-            for j in range(1, k - 1):
-                tris.append((idx[0], idx[j], idx[j + 1]))
-    except ValueError as e:
-        raise ValueError(f'malformed face line ({e})') from None
-    return pos, np.array(tris, dtype=np.int64).reshape(-1, 3)

@@ -9,11 +9,12 @@ row :math:`i`, column :math:`j` covers :math:`u \in [j, j + 1)`,
 :math:`v \in [i, i + 1)`. The camera centre is :math:`-R^\top t`.
 """
 import math
+from typing import Tuple
 
 import torch
 from torch import Tensor
 
-from ._checks import check_tensor
+from ._checks import check_points, check_positive_int, check_tensor
 
 
 def check_cameras(intrinsics, extrinsics, like: Tensor) -> int:
@@ -125,3 +126,77 @@ def sample_images(images: Tensor, uv: Tensor):
         nan |= bad.any(-1)
         value = value + torch.where(bad, torch.zeros_like(t), t) * w
     return value, nan
+
+
+def check_image_size(image_size, name: str = 'image_size'):
+    """``(height, width)``, two positive integers."""
+    if not (isinstance(image_size, (tuple, list)) and len(image_size) == 2):
+        raise ValueError(f"'{name}' must be (height, width), got "
+                         f"{image_size!r}")
+    return (check_positive_int(image_size[0], f'{name}[0]'),
+            check_positive_int(image_size[1], f'{name}[1]'))
+
+
+def look_at_cameras(positions: Tensor, target=(0.0, 0.0, 0.0),
+                    fov_degrees: float = 45.0,
+                    image_size: Tuple[int, int] = (256, 256),
+                    up=(0.0, 0.0, 1.0)):
+    r"""Pinhole cameras at :obj:`positions` looking at :obj:`target`,
+    OpenCV style (:math:`z_c` forward, :math:`x_c` right, :math:`y_c` down
+    in the image, world :math:`z` up on screen):
+
+    .. math::
+        z_c = \frac{\mathbf{t} - \mathbf{c}}{\|\mathbf{t} - \mathbf{c}\|},
+        \quad x_c = \frac{z_c \times \mathbf{u}}{\|z_c \times
+        \mathbf{u}\|}, \quad y_c = z_c \times x_c, \quad
+        R = [x_c; y_c; z_c], \quad t = -R\,\mathbf{c},
+
+    and :math:`K` with :math:`f_x = f_y = \frac{H/2}{\tan(\mathrm{fov}/2)}`
+    (:obj:`fov_degrees` spans the image height) and the principal point at
+    the image centre :math:`(W/2, H/2)`. A camera looking along
+    :math:`\pm` :obj:`up` uses the world :math:`y` axis as up instead.
+
+    Args:
+        positions (torch.Tensor): Camera centres :math:`(V, 3)`.
+        target (sequence, optional): The point looked at.
+            (default: origin)
+        fov_degrees (float, optional): Vertical field of view.
+            (default: :obj:`45.0`)
+        image_size (tuple, optional): ``(height, width)``.
+            (default: :obj:`(256, 256)`)
+        up (sequence, optional): World up. (default: :math:`+z`)
+
+    Returns:
+        ``(intrinsics, extrinsics)``: :math:`(V, 3, 3)` and
+        :math:`(V, 3, 4)`, in the dtype of :obj:`positions`.
+    """
+    positions = check_points(positions, 'positions')
+    height, width = check_image_size(image_size)
+    if not (0 < float(fov_degrees) < 180):
+        raise ValueError(f"'fov_degrees' must lie in (0, 180), got "
+                         f"{fov_degrees!r}")
+    dtype = positions.dtype
+    target = torch.as_tensor(target, dtype=dtype).reshape(3)
+    up = torch.as_tensor(up, dtype=dtype).reshape(3)
+    forward = target - positions
+    dist = forward.norm(dim=1, keepdim=True)
+    if bool((dist <= 1e-12).any()):
+        raise ValueError("a camera position coincides with 'target'; "
+                         "move it away")
+    forward = forward / dist
+    right = torch.cross(forward, up.expand_as(forward), dim=1)
+    # looking straight along up: any other up will do
+    along = right.norm(dim=1) < 1e-6
+    alt = torch.tensor([0.0, 1.0, 0.0], dtype=dtype).expand_as(forward)
+    right = torch.where(along[:, None],
+                        torch.cross(forward, alt, dim=1), right)
+    right = right / right.norm(dim=1, keepdim=True)
+    down = torch.cross(forward, right, dim=1)
+    R = torch.stack([right, down, forward], 1)
+    t = -(R @ positions.unsqueeze(-1))
+    extrinsics = torch.cat([R, t], 2)
+    focal = 0.5 * height / math.tan(math.radians(float(fov_degrees)) / 2)
+    K = torch.tensor([[focal, 0.0, width / 2], [0.0, focal, height / 2],
+                      [0.0, 0.0, 1.0]], dtype=dtype)
+    intrinsics = K.expand(positions.size(0), 3, 3).clone()
+    return intrinsics, extrinsics

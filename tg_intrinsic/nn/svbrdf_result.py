@@ -6,7 +6,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from tg_intrinsic.utils import _atomic
+from tg_intrinsic.utils import atomic_write
 
 
 @dataclass
@@ -56,7 +56,7 @@ class SVBRDFResult:
         import matplotlib
         maps = self.maps()
         paths = [os.path.join(directory, 'maps.npz')]
-        _atomic(paths[0], lambda f: np.savez(f, **maps), 'wb')
+        atomic_write(paths[0], lambda f: np.savez(f, **maps), 'wb')
         turbo = matplotlib.colormaps['turbo']
         if self.texture_shape is None:
             index = _splat_index(pos, intrinsics, extrinsics, image_size)
@@ -73,7 +73,7 @@ class SVBRDFResult:
                 image = np.nan_to_num(value)
             image = (np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8)
             path = os.path.join(directory, f'{name}.png')
-            _atomic(path, lambda f, im=image: _write_png(f, im), 'wb')
+            atomic_write(path, lambda f, im=image: _write_png(f, im), 'wb')
             paths.append(path)
         return paths
 

@@ -1,0 +1,103 @@
+"""What every sub-command shares: the user-error type, argument types that
+reject bad values in one line, the output folder and progress bars."""
+import argparse
+import math
+import os
+from typing import Iterable, Optional
+
+from tqdm.auto import tqdm
+
+
+class UsageError(Exception):
+    """A mistake in what the user asked for (a missing file, a bad value):
+    the command line prints the message on one line and exits with 2."""
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse that reports a bad argument on one line (no usage block)
+    and exits with code 2, like every other user mistake."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} "
+                     f"--help)\n")
+
+
+def one_line(message: str) -> str:
+    """A (possibly multi-line) error message as one line."""
+    return ' '.join(str(message).split())
+
+
+def _number(kind, text, minimum, strict):
+    try:
+        value = kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected {'an integer' if kind is int else 'a number'}, got "
+            f"{text!r}") from None
+    if kind is float and not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    if value < minimum or (strict and value == minimum):
+        bound = 'greater than' if strict else 'at least'
+        raise argparse.ArgumentTypeError(f"must be {bound} {minimum}, got "
+                                         f"{text!r}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    return _number(float, text, 0.0, strict=True)
+
+
+def nonnegative_float(text: str) -> float:
+    """argparse type: a finite number >= 0."""
+    return _number(float, text, 0.0, strict=False)
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1."""
+    return _number(int, text, 1, strict=False)
+
+
+def nonnegative_int(text: str) -> int:
+    """argparse type: an integer >= 0."""
+    return _number(int, text, 0, strict=False)
+
+
+def existing_path(text: str) -> str:
+    """argparse type: a file or folder that exists."""
+    if not os.path.exists(text):
+        raise argparse.ArgumentTypeError(f"{text!r} does not exist")
+    return text
+
+
+def output_folder(path: str) -> str:
+    """Creates the output folder (and parents) and checks it is writable."""
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise UsageError(f"--out {path!r} is a file; give a folder")
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as error:
+        raise UsageError(f"cannot create the output folder {path!r}: "
+                         f"{error.strerror}") from None
+    if not os.access(path, os.W_OK):
+        raise UsageError(f"the output folder {path!r} is not writable")
+    return path
+
+
+def progress(iterable: Iterable, desc: str, quiet: bool = False,
+             total: Optional[int] = None, unit: str = 'it'):
+    """A tqdm bar on stderr, off with ``--quiet``."""
+    return tqdm(iterable, desc=desc, disable=quiet, total=total, unit=unit,
+                leave=False, dynamic_ncols=True)
+
+
+def common_options() -> argparse.ArgumentParser:
+    """Options every sub-command accepts (before or after its name)."""
+    parent = argparse.ArgumentParser(add_help=False)
+    parent.add_argument('--debug', action='store_true',
+                        default=argparse.SUPPRESS,
+                        help='show the Python traceback of an error')
+    parent.add_argument('--quiet', action='store_true',
+                        default=argparse.SUPPRESS,
+                        help='no progress bars')
+    return parent

@@ -1,0 +1,11 @@
+"""Placeholder (being written)."""
+HELP = 'placeholder'
+EXAMPLE = ''
+
+
+def add_arguments(parser):
+    pass
+
+
+def run(args):
+    raise NotImplementedError

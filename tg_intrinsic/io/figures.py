@@ -1,0 +1,231 @@
+r"""Figures a person can read: values drawn on a surface from a few
+viewpoints with a titled colour bar, and line plots, saved atomically as
+PNG.
+
+Meshes are rasterised (:func:`~tg_intrinsic.geometry.render.rasterize`),
+values interpolated by the barycentrics of each pixel's triangle and shaded
+by a headlight, :math:`c = \text{cmap}(v) (0.35 + 0.65 |n \cdot d|)`.
+Point clouds are splatted as discs as wide as their spacing, nearest
+point in front (:func:`splat_index`).
+"""
+import math
+from typing import Optional, Sequence
+
+import numpy as np
+import torch
+
+from tg_intrinsic.utils import atomic_write
+
+# Viewing directions (from the object towards the camera), with a world z
+# up on screen: three-quarter views from front-left, front-right and above.
+VIEWS = {
+    'front-left': (-1.0, -1.6, 0.7),
+    'front-right': (1.6, -1.0, 0.7),
+    'back': (0.6, 1.6, 0.5),
+    'top': (0.2, -0.4, 1.6),
+}
+
+
+def _pyplot():
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def save_figure(fig, path: str, dpi: int = 110) -> str:
+    """Saves a matplotlib figure as PNG atomically and closes it."""
+    plt = _pyplot()
+    atomic_write(path, lambda f: fig.savefig(f, format='png', dpi=dpi), 'wb')
+    plt.close(fig)
+    return path
+
+
+def _cameras(pos: torch.Tensor, directions, size: int):
+    from tg_intrinsic.geometry.cameras import look_at_cameras
+    centre = 0.5 * (pos.max(0).values + pos.min(0).values)
+    radius = float((pos - centre).norm(dim=1).max()) or 1.0
+    direction = torch.tensor(directions, dtype=torch.float64)
+    direction = direction / direction.norm(dim=1, keepdim=True)
+    distance = 4.0 * radius
+    fov = 2 * math.degrees(math.asin(1 / 4.0)) * 1.1
+    return look_at_cameras(centre + distance * direction, target=centre,
+                           fov_degrees=fov, image_size=(size, size))
+
+
+def splat_index(pos: torch.Tensor, intrinsics: torch.Tensor,
+                extrinsics: torch.Tensor, image_size) -> np.ndarray:
+    """The point seen in each pixel of one pinhole camera (-1 for the
+    background): points are splatted as squares as wide as their median
+    nearest-neighbour spacing (at most 24 pixels), nearest in front, so
+    a sampled surface reads as a surface and hides what lies behind it.
+
+    Args:
+        pos: Points :math:`(N, 3)`.
+        intrinsics: :math:`(1, 3, 3)` or :math:`(3, 3)`.
+        extrinsics: :math:`(1, 3, 4)` or :math:`(3, 4)`, world to camera.
+        image_size: ``(height, width)``.
+    """
+    from tg_intrinsic.geometry import knn
+    from tg_intrinsic.geometry.cameras import project
+    pos = pos.detach().cpu().double()
+    height, width = image_size
+    K = intrinsics.detach().cpu().double().reshape(1, 3, 3)
+    E = extrinsics.detach().cpu().double().reshape(1, 3, 4)
+    uv, depth = project(pos, K, E)
+    uv, depth = uv[0], depth[0]
+    inside = (depth > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < width) \
+        & (uv[:, 1] >= 0) & (uv[:, 1] < height)
+    image = np.full((height, width), -1, dtype=np.int64)
+    if not bool(inside.any()):
+        return image
+    if pos.size(0) > 1:
+        edge = knn(pos, 1)
+        spacing = float((pos[edge[0]] - pos[edge[1]]).norm(dim=-1).median())
+    else:
+        spacing = 0.0
+    pixels = spacing * float(K[0, 0, 0]) / float(depth[inside].median())
+    reach = int(min(max(round(0.75 * pixels), 1), 24))
+    # paint far to near so the nearest point wins each pixel
+    order = torch.argsort(depth, descending=True)
+    order = order[inside[order]]
+    col = uv[order, 0].floor().long().numpy()
+    row = uv[order, 1].floor().long().numpy()
+    index = order.numpy()
+    depth_image = np.full((height, width), np.inf)
+    point_depth = depth[order].numpy()
+    for dy in range(-reach, reach + 1):
+        for dx in range(-reach, reach + 1):
+            if dx * dx + dy * dy > reach * reach + reach:
+                continue  # round splats
+            r = np.clip(row + dy, 0, height - 1)
+            c = np.clip(col + dx, 0, width - 1)
+            # numpy assignment keeps the last write: the nearest point
+            nearer = point_depth <= depth_image[r, c]
+            depth_image[r[nearer], c[nearer]] = point_depth[nearer]
+            image[r[nearer], c[nearer]] = index[nearer]
+    return image
+
+
+def render_surface(pos, face=None, values=None, colors=None, normal=None,
+                   cmap='viridis', vmin=None, vmax=None,
+                   views: Sequence[str] = ('front-left', 'front-right'),
+                   size: int = 360):
+    """Shaded RGB images ``(V, size, size, 3)`` in [0, 1] (white
+    background) of a mesh (``face`` :math:`(3, F)` or :math:`(F, 3)`) or a
+    point cloud (``face`` None) coloured by per-vertex ``values``
+    :math:`(N)` through ``cmap``, or by ``colors`` :math:`(N, 3)` in
+    [0, 1], or grey."""
+    import matplotlib
+    from tg_intrinsic.geometry.render import rasterize
+    pos = torch.as_tensor(np.asarray(pos, dtype=np.float64))
+    n = pos.size(0)
+    if colors is not None:
+        rgb = np.clip(np.asarray(colors, dtype=np.float64).reshape(n, 3),
+                      0, 1)
+    elif values is not None:
+        values = np.asarray(values, dtype=np.float64).reshape(n)
+        lo = np.nanmin(values) if vmin is None else vmin
+        hi = np.nanmax(values) if vmax is None else vmax
+        scaled = (values - lo) / (hi - lo if hi > lo else 1.0)
+        rgb = matplotlib.colormaps[cmap](np.clip(scaled, 0, 1))[:, :3]
+        rgb[np.isnan(values)] = 0.5
+    else:
+        rgb = np.full((n, 3), 0.75)
+    if face is not None:
+        face = torch.as_tensor(np.asarray(face, dtype=np.int64))
+        if face.size(0) != 3:
+            face = face.t()
+        face = face.contiguous()
+        from tg_intrinsic.geometry import vertex_normals
+        normal = vertex_normals(pos, face).numpy()  # smooth shading
+    K, E = _cameras(pos, [VIEWS[v] for v in views], size)
+    images = np.ones((len(views), size, size, 3))
+    for v in range(len(views)):
+        R = E[v, :, :3]
+        look = R[2].numpy()  # camera forward, world coordinates
+        if face is not None:
+            face_id, bary, _ = rasterize(pos, face, K[v], E[v], size, size)
+            hit = face_id.numpy() >= 0
+            fid = face_id.numpy()[hit]
+            corners = face.numpy()[:, fid].T  # (hits, 3)
+            weight = bary.numpy()[hit][..., None]
+            colour = (weight * rgb[corners]).sum(1)
+            shade = np.abs((weight * normal[corners]).sum(1) @ look)
+        else:
+            index = splat_index(pos, K[v], E[v], (size, size))
+            hit = index >= 0
+            colour = rgb[index[hit]]
+            if normal is not None:
+                nrm = np.asarray(normal, dtype=np.float64).reshape(n, 3)
+                shade = np.abs(nrm[index[hit]] @ look)
+            else:
+                shade = np.ones(int(hit.sum()))
+        images[v][hit] = colour * (0.35 + 0.65 * shade[:, None])
+    return images
+
+
+def draw_surface(path: str, pos, face=None, values=None, colors=None,
+                 normal=None, title: str = '', label: str = '',
+                 cmap: str = 'viridis', vmin: Optional[float] = None,
+                 vmax: Optional[float] = None,
+                 views: Sequence[str] = ('front-left', 'front-right'),
+                 size: int = 360) -> str:
+    """Draws per-vertex ``values`` (with a colour bar labelled ``label``,
+    which should carry the units) or ``colors`` on a mesh or point cloud
+    from the named ``views`` (keys of :data:`VIEWS`) and saves the figure
+    as PNG at ``path`` atomically. Returns ``path``."""
+    plt = _pyplot()
+    import matplotlib
+    images = render_surface(pos, face, values, colors, normal, cmap, vmin,
+                            vmax, views, size)
+    fig, axes = plt.subplots(1, len(views) + (values is not None and colors
+                                              is None),
+                             figsize=(3.2 * len(views) + 1.0, 3.6),
+                             gridspec_kw=dict(
+                                 width_ratios=[1] * len(views) + (
+                                     [0.06] if values is not None and colors
+                                     is None else [])))
+    axes = np.atleast_1d(axes)
+    for ax, image, view in zip(axes, images, views):
+        ax.imshow(image, interpolation='lanczos')
+        ax.set_title(f'view from {view}', fontsize=9)
+        ax.set_axis_off()
+    if values is not None and colors is None:
+        finite = np.asarray(values, dtype=np.float64)
+        lo = np.nanmin(finite) if vmin is None else vmin
+        hi = np.nanmax(finite) if vmax is None else vmax
+        norm = matplotlib.colors.Normalize(lo, hi if hi > lo else lo + 1)
+        fig.colorbar(matplotlib.cm.ScalarMappable(norm, cmap), cax=axes[-1],
+                     label=label)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def line_figure(path: str, series, title: str, xlabel: str, ylabel: str,
+                logy: bool = False, integer_x: bool = False,
+                ylim=None, hlines=()) -> str:
+    """A line plot of ``series`` (a list of ``(label, x, y, style)``) with
+    a title, axis labels and a legend; ``hlines`` adds labelled horizontal
+    reference lines ``(label, y, style)``. Saved atomically as PNG."""
+    plt = _pyplot()
+    from matplotlib.ticker import MaxNLocator
+    fig, ax = plt.subplots(figsize=(5.6, 3.8))
+    for label, x, y, style in series:
+        ax.plot(x, y, style, label=label)
+    for label, y, style in hlines:
+        ax.axhline(y, linestyle=style, color='grey', label=label)
+    if logy:
+        ax.set_yscale('log')
+    if ylim is not None:
+        ax.set_ylim(*ylim)
+    if integer_x:
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return save_figure(fig, path)

@@ -1,0 +1,267 @@
+"""Meshes and point clouds on disk: OBJ, OFF, PLY and STL in (trimesh, and
+a direct OFF parser for ModelNet's malformed headers), binary PLY with
+per-vertex properties out, per-vertex signals from ``.npy``, text or PLY
+properties."""
+import os
+import os.path as osp
+from typing import Dict, Optional, Tuple
+
+import numpy as np
+
+from tg_intrinsic.utils import atomic_write
+
+MESH_EXTENSIONS = ('.obj', '.off', '.ply', '.stl')
+SIGNAL_EXTENSIONS = ('.npy', '.txt', '.csv')
+# PLY vertex properties that are the geometry itself, not a signal
+_GEOMETRY_PROPERTIES = ('x', 'y', 'z')
+
+
+def read_mesh(path: str) -> Tuple[np.ndarray, np.ndarray]:
+    """Reads a triangle mesh: ``(pos [N, 3] float64, face [F, 3] int64)``.
+    Vertices are neither merged nor reordered; polygons become triangle
+    fans.
+
+    Raises a :class:`ValueError` that names the file if it cannot be read,
+    holds no triangles, has NaN or infinite coordinates, or faces that
+    index past the vertex count.
+    """
+    pos, face, _ = read_surface(path)
+    if face is None:
+        raise ValueError(f"'{path}' holds a point cloud, not a triangle mesh")
+    return pos, face
+
+
+def read_surface(path: str) -> Tuple[np.ndarray, Optional[np.ndarray],
+                                     Dict[str, np.ndarray]]:
+    """Reads a mesh or a point cloud (OBJ, OFF, PLY, STL): ``(pos [N, 3]
+    float64, face [F, 3] int64 or None for a point cloud, properties)``,
+    where ``properties`` holds the PLY vertex properties other than
+    ``x, y, z`` by name (``nx``, ``red``, ``quality``, ...; empty for other
+    formats).
+
+    Raises a :class:`ValueError` that names the file and the problem.
+    """
+    path = os.fspath(path)
+    if not osp.exists(path):
+        raise FileNotFoundError(f"'{path}' does not exist")
+    if osp.isdir(path):
+        raise ValueError(f"'{path}' is a folder; give a mesh or point cloud "
+                         f"file ({'/'.join(MESH_EXTENSIONS)})")
+    ext = osp.splitext(path)[1].lower()
+    if ext not in MESH_EXTENSIONS:
+        raise ValueError(f"'{path}': unknown format {ext or '(none)'!r}; "
+                         f"use one of {'/'.join(MESH_EXTENSIONS)}")
+    properties: Dict[str, np.ndarray] = {}
+    try:
+        if ext == '.off':
+            pos, face = read_off(path)
+        else:
+            import trimesh
+            kwargs = dict(maintain_order=True, skip_materials=True) \
+                if ext == '.obj' else {}
+            loaded = trimesh.load(path, process=False, **kwargs)
+            if isinstance(loaded, trimesh.Scene):
+                loaded = loaded.to_geometry() if len(loaded.geometry) else \
+                    None
+            if loaded is None:
+                raise ValueError('no geometry in the file')
+            pos = np.asarray(loaded.vertices, dtype=np.float64)
+            faces = getattr(loaded, 'faces', None)
+            face = None if faces is None or len(faces) == 0 else \
+                np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+            if ext == '.ply':
+                properties = _ply_vertex_properties(loaded, len(pos))
+    except (OSError, ValueError, IndexError, KeyError, TypeError,
+            AttributeError) as error:
+        raise ValueError(f"could not read '{path}': "
+                         f"{type(error).__name__}: {error}") from error
+    if pos.ndim != 2 or pos.shape[1] != 3 or len(pos) == 0:
+        raise ValueError(f"'{path}' has no vertices")
+    if not np.isfinite(pos).all():
+        bad = int((~np.isfinite(pos)).any(1).sum())
+        raise ValueError(f"'{path}' has NaN or infinite coordinates at {bad} "
+                         f"vertex(es); repair or remove them")
+    if face is not None and len(face) == 0:
+        face = None  # e.g. an OFF point cloud
+    if face is not None and (face.min() < 0 or face.max() >= len(pos)):
+        raise ValueError(f"'{path}' has face indices outside [0, "
+                         f"{len(pos) - 1}] (the vertex count is {len(pos)})")
+    return pos, face, properties
+
+
+def _ply_vertex_properties(loaded, num_vertices: int
+                           ) -> Dict[str, np.ndarray]:
+    raw = getattr(loaded, 'metadata', {}).get('_ply_raw', {})
+    data = raw.get('vertex', {}).get('data') if isinstance(raw, dict) \
+        else None
+    out: Dict[str, np.ndarray] = {}
+    if data is None or data.dtype.names is None or len(data) != \
+            num_vertices:
+        return out
+    for name in data.dtype.names:
+        if name in _GEOMETRY_PROPERTIES:
+            continue
+        column = data[name]
+        if column.dtype.names:  # a list property: (count, values)
+            column = column[column.dtype.names[-1]]
+        out[name] = np.asarray(column)
+    return out
+
+
+def read_off(path: str) -> Tuple[np.ndarray, np.ndarray]:
+    """Reads an OFF file (also ``COFF``/``NOFF`` with extra columns, and
+    ModelNet's ``OFF<nv> <nf> <ne>`` single-line header). Polygons are
+    split into triangle fans."""
+    with open(path, 'r', errors='replace') as f:
+        lines = [ln.split('#', 1)[0].strip() for ln in f]
+    lines = [ln for ln in lines if ln]
+    if not lines:
+        raise ValueError('empty file')
+    head = lines[0]
+    keyword = head.split()[0]
+    if not keyword.upper().lstrip('CN').startswith('OFF'):
+        raise ValueError(f"missing 'OFF' header (first line: {head[:40]!r})")
+    rest = head[head.upper().index('OFF') + 3:].split()
+    i = 1
+    if not rest:  # counts on the next line
+        if len(lines) < 2:
+            raise ValueError('the OFF header has no vertex and face counts')
+        rest = lines[1].split()
+        i = 2
+    try:
+        nv, nf = int(rest[0]), int(rest[1])
+    except (IndexError, ValueError):
+        raise ValueError(f'malformed OFF header {head!r}') from None
+    if len(lines) < i + nv + nf:
+        raise ValueError(f'OFF header announces {nv} vertices and {nf} faces '
+                         f'but the file has only {len(lines) - i} data lines')
+    vlines = lines[i:i + nv]
+    try:
+        pos = np.array([ln.split()[:3] for ln in vlines], dtype=np.float64)
+    except ValueError:
+        raise ValueError('malformed vertex line') from None
+    if pos.shape != (nv, 3):
+        raise ValueError('every vertex line needs 3 coordinates')
+    ftok = [ln.split() for ln in lines[i + nv:i + nv + nf]]
+    try:
+        if all(len(t) >= 4 and t[0] == '3' for t in ftok):  # all triangles
+            return pos, np.array([t[1:4] for t in ftok],
+                                 dtype=np.int64).reshape(-1, 3)
+        tris = []
+        for tok in ftok:
+            k = int(tok[0])
+            if k < 3 or len(tok) < k + 1:
+                raise ValueError(f"malformed face line {' '.join(tok)[:40]!r}")
+            idx = [int(t) for t in tok[1:k + 1]]
+            for j in range(1, k - 1):
+                tris.append((idx[0], idx[j], idx[j + 1]))
+    except ValueError as e:
+        raise ValueError(f'malformed face line ({e})') from None
+    return pos, np.array(tris, dtype=np.int64).reshape(-1, 3)
+
+
+def read_signal(source: str, num_vertices: int,
+                properties: Optional[Dict[str, np.ndarray]] = None
+                ) -> np.ndarray:
+    """A per-vertex signal, ``(N)`` or ``(N, C)`` float64, from ``source``:
+    a ``.npy`` file, a ``.txt`` / ``.csv`` file with one row per vertex,
+    ``FILE.ply:NAME`` (vertex property ``NAME`` of a PLY file) or ``NAME``
+    alone, a vertex property of the input (``properties``, from
+    :func:`read_surface`).
+
+    Raises a :class:`ValueError` when the source is missing, unreadable,
+    not finite, or has another number of rows than ``num_vertices``.
+    """
+    properties = properties or {}
+    ply, _, name = source.rpartition(':')
+    if ply.lower().endswith('.ply'):
+        _, _, props = read_surface(ply)
+        if name not in props:
+            raise ValueError(f"'{ply}' has no vertex property {name!r}; it "
+                             f"has {sorted(props) or 'none'}")
+        values = props[name]
+    elif osp.splitext(source)[1].lower() in SIGNAL_EXTENSIONS:
+        if not osp.isfile(source):
+            raise FileNotFoundError(f"signal file '{source}' does not exist")
+        try:
+            if source.lower().endswith('.npy'):
+                values = np.load(source, allow_pickle=False)
+            else:
+                values = np.loadtxt(source, delimiter=',' if source.lower(
+                ).endswith('.csv') else None, ndmin=1)
+        except (OSError, ValueError) as error:
+            raise ValueError(f"could not read the signal '{source}': "
+                             f"{error}") from error
+    elif source in properties:
+        values = properties[source]
+    else:
+        raise ValueError(
+            f"signal {source!r} is neither a {'/'.join(SIGNAL_EXTENSIONS)} "
+            f"file, FILE.ply:PROPERTY, nor a vertex property of the input "
+            f"(it has {sorted(properties) or 'none'})")
+    values = np.asarray(values)
+    if values.dtype.kind not in 'biuf':
+        raise ValueError(f"signal {source!r} is not numeric "
+                         f"({values.dtype})")
+    values = values.astype(np.float64)
+    if values.ndim not in (1, 2) or values.shape[0] != num_vertices:
+        raise ValueError(f"signal {source!r} has shape {values.shape} but "
+                         f"the surface has {num_vertices} vertices; give one "
+                         f"row per vertex")
+    if not np.isfinite(values).all():
+        raise ValueError(f"signal {source!r} holds NaN or infinite values")
+    return values
+
+
+def write_ply(path: str, pos: np.ndarray, face: Optional[np.ndarray] = None,
+              properties: Optional[Dict[str, np.ndarray]] = None,
+              colors: Optional[np.ndarray] = None) -> str:
+    """Writes a binary little-endian PLY atomically: positions as doubles,
+    ``colors`` (``(N, 3)`` in [0, 1]) as ``red green blue`` bytes, every
+    entry of ``properties`` (``(N)`` or ``(N, C)``) as double vertex
+    properties (``name`` or ``name_0 .. name_{C-1}``), and triangles
+    ``face (F, 3)``. MeshLab, CloudCompare, Blender and trimesh read it.
+    Returns ``path``."""
+    pos = np.asarray(pos, dtype=np.float64)
+    n = len(pos)
+    fields = [('x', '<f8'), ('y', '<f8'), ('z', '<f8')]
+    columns = [pos[:, 0], pos[:, 1], pos[:, 2]]
+    if colors is not None:
+        colors = np.asarray(colors, dtype=np.float64).reshape(n, 3)
+        rgb = (np.clip(np.nan_to_num(colors), 0, 1) * 255 + 0.5).astype(
+            np.uint8)
+        for k, name in enumerate(('red', 'green', 'blue')):
+            fields.append((name, 'u1'))
+            columns.append(rgb[:, k])
+    for name, values in (properties or {}).items():
+        values = np.asarray(values, dtype=np.float64).reshape(n, -1)
+        names = [name] if values.shape[1] == 1 else \
+            [f'{name}_{k}' for k in range(values.shape[1])]
+        for k, column in enumerate(names):
+            fields.append((column, '<f8'))
+            columns.append(values[:, k])
+    vertices = np.empty(n, dtype=fields)
+    for (name, _), column in zip(fields, columns):
+        vertices[name] = column
+    types = {'<f8': 'double', 'u1': 'uchar'}
+    header = ['ply', 'format binary_little_endian 1.0',
+              'comment written by tg_intrinsic', f'element vertex {n}']
+    header += [f'property {types[t]} {name}' for name, t in fields]
+    if face is not None:
+        face = np.asarray(face, dtype=np.int64).reshape(-1, 3)
+        header += [f'element face {len(face)}',
+                   'property list uchar int vertex_indices']
+        triangles = np.empty(len(face), dtype=[('n', 'u1'),
+                                               ('v', '<i4', (3, ))])
+        triangles['n'] = 3
+        triangles['v'] = face
+    header.append('end_header')
+
+    def write(f):
+        f.write(('\n'.join(header) + '\n').encode('ascii'))
+        f.write(vertices.tobytes())
+        if face is not None:
+            f.write(triangles.tobytes())
+
+    atomic_write(path, write, 'wb')
+    return path

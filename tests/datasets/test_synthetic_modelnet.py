@@ -176,3 +176,19 @@ def test_bad_arguments(tmp_path):
         SyntheticModelNet(str(tmp_path), num_per_class=10)
     with pytest.raises(ValueError, match='num_points'):
         SyntheticModelNet(str(tmp_path), num_points=0)
+
+
+def test_a_pre_transform_is_never_skipped_by_an_older_cache(tmp_path):
+    # The README's DeltaConv example passes pre_transform=MLSOperators(...)
+    # to a root the demo may already have generated without one.
+    from tg_intrinsic.transforms import MLSOperators
+    kwargs = dict(num_points=64, num_per_class=(1, 1), log=False)
+    plain = SyntheticModelNet(str(tmp_path), 'train', **kwargs)
+    assert 'grad_weight' not in plain[0]
+    pre = SyntheticModelNet(str(tmp_path), 'train', **kwargs,
+                            pre_transform=MLSOperators(k=8))
+    assert 'grad_weight' in pre[0]
+    other = SyntheticModelNet(str(tmp_path), 'train', **kwargs,
+                              pre_transform=MLSOperators(k=6))
+    assert other[0].edge_index.size(1) == 6 * other[0].num_nodes
+    assert torch.equal(plain[0].pos, pre[0].pos)

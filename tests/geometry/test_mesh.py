@@ -190,3 +190,19 @@ def test_degenerate_and_malformed_faces_raise():
         cotan_laplacian(pos * float('nan'), torch.tensor([[0], [1], [3]]))
     with pytest.raises(ValueError, match='float32 or float64'):
         lumped_mass(pos.long(), torch.tensor([[0], [1], [3]]))
+
+
+def test_laplacian_spectrum_of_the_sphere_and_its_invariances():
+    # unit sphere: lambda * area = 4 pi l (l + 1), multiplicity 2l + 1
+    from tg_intrinsic.geometry import laplacian_spectrum
+    pos, face = icosphere(4)
+    spectrum = laplacian_spectrum(pos, face, 15)
+    exact = torch.tensor([4 * math.pi * l * (l + 1) for l in (1, 2, 3)
+                          for _ in range(2 * l + 1)], dtype=torch.float64)
+    assert torch.allclose(spectrum, exact, rtol=0.02)
+    # scale and rigid motion leave it unchanged
+    Q, _ = torch.linalg.qr(torch.randn(3, 3, dtype=torch.float64))
+    moved = laplacian_spectrum(3.0 * pos @ Q.T + 1.0, face, 15)
+    assert torch.allclose(moved, spectrum, rtol=1e-6)
+    with pytest.raises(ValueError, match='at most'):
+        laplacian_spectrum(*icosphere(0), 11)  # 12 vertices

@@ -13,13 +13,13 @@ import sys
 import warnings
 from typing import List, Optional
 
-from .common import ArgumentParser, UsageError, common_options, one_line
+from .common import ArgumentParser, common_options, one_line
 
 COMMANDS = ('demo', 'train', 'precompute', 'solve', 'svbrdf', 'info')
 
 # Errors that mean "the input or the request is wrong", not "the library
 # is broken": reported on one line with exit code 2.
-USER_ERRORS = (UsageError, ValueError, FileNotFoundError, IsADirectoryError,
+USER_ERRORS = (ValueError, FileNotFoundError, IsADirectoryError,
                NotADirectoryError, PermissionError)
 
 

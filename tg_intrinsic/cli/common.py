@@ -8,7 +8,7 @@ from typing import Iterable, Optional
 from tqdm.auto import tqdm
 
 
-class UsageError(Exception):
+class UsageError(ValueError):
     """A mistake in what the user asked for (a missing file, a bad value):
     the command line prints the message on one line and exits with 2."""
 

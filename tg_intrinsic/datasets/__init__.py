@@ -10,11 +10,13 @@ r"""Offline, deterministic datasets of curved surfaces (no downloads).
   spatially varying principled BRDF under an environment map, rendered by
   an independent estimator of the reflection integral (ground truth for
   SVBRDF recovery); :func:`look_at_cameras` builds its pinhole cameras.
+* :func:`bumpy_torus`: a closed bumpy torus of any size, for solvers.
 """
 from .synthetic_shrec import SyntheticSHREC
 from .synthetic_modelnet import SyntheticModelNet
 from .mesh_folder import MeshFolder
 from .svbrdf_scene import svbrdf_scene, look_at_cameras
+from .surfaces import bumpy_torus
 
 __all__ = [
     'SyntheticSHREC',
@@ -22,4 +24,5 @@ __all__ = [
     'MeshFolder',
     'svbrdf_scene',
     'look_at_cameras',
+    'bumpy_torus',
 ]

@@ -1,13 +1,37 @@
 """Helpers shared by the datasets (private)."""
+import hashlib
+import os.path as osp
+import re
+
 import numpy as np
 from torch_geometric.data import InMemoryDataset
 
 
+def processing_suffix(pre_transform, pre_filter) -> str:
+    """``''`` without pre-processing, else ``'_'`` and a hash of what the
+    pre-transform and pre-filter print as: each pre-processing gets its own
+    processed folder, so a cache made with another (or no) pre-transform is
+    never silently reused. Memory addresses are dropped from the text so
+    functions hash the same from run to run."""
+    if pre_transform is None and pre_filter is None:
+        return ''
+    text = ' | '.join(re.sub(r' at 0x[0-9a-fA-F]+', '', repr(f))
+                      for f in (pre_transform, pre_filter))
+    return '_' + hashlib.sha1(text.encode()).hexdigest()[:10]
+
+
 class GeneratedDataset(InMemoryDataset):
-    """An InMemoryDataset made in ``process()``: no raw files, no download."""
+    """An InMemoryDataset made in ``process()``: no raw files, no download.
+    The processed folder is ``root/processed`` plus
+    :func:`processing_suffix`."""
     @property
     def raw_file_names(self):
         return []
+
+    @property
+    def processed_dir(self) -> str:
+        return osp.join(self.root, 'processed' + processing_suffix(
+            self.pre_transform, self.pre_filter))
 
     def download(self):
         pass

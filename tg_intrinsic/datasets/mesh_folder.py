@@ -14,7 +14,7 @@ from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.io.mesh import read_mesh
 from tg_intrinsic.utils import atomic_write_json
 
-from ._common import check_split, save_atomic
+from ._common import check_split, processing_suffix, save_atomic
 
 EXTENSIONS = ('.obj', '.off', '.ply')
 LAYOUT = ('root/<class>/<split>/<name>.obj|.off|.ply, e.g. '
@@ -35,7 +35,8 @@ class MeshFolder(InMemoryDataset):
     ModelNet's known malformed header where the counts follow :obj:`OFF`
     on the same line (:obj:`OFF490 518 0`); :obj:`.obj` and :obj:`.ply`
     files are read with :obj:`trimesh` (:obj:`process=False`). The processed
-    dataset is cached in :obj:`root/processed_tg_intrinsic/`.
+    dataset is cached in :obj:`root/processed_tg_intrinsic/` (a folder of
+    its own per :obj:`pre_transform` and :obj:`pre_filter`).
 
     Args:
         root (str): The dataset folder.
@@ -93,7 +94,8 @@ class MeshFolder(InMemoryDataset):
 
     @property
     def processed_dir(self) -> str:
-        return osp.join(self.root, 'processed_tg_intrinsic')
+        suffix = processing_suffix(self.pre_transform, self.pre_filter)
+        return osp.join(self.root, 'processed_tg_intrinsic' + suffix)
 
     @property
     def processed_file_names(self):
@@ -108,7 +110,7 @@ class MeshFolder(InMemoryDataset):
         names = []
         for name in sorted(os.listdir(self.root)):
             path = osp.join(self.root, name)
-            if name.startswith('.') or name == 'processed_tg_intrinsic' \
+            if name.startswith(('.', 'processed_tg_intrinsic')) \
                     or not osp.isdir(path):
                 continue
             if osp.isdir(osp.join(path, 'train')) or \

@@ -10,7 +10,8 @@ from .frames import estimate_normals, tangent_frames
 from .mesh import (face_areas, face_normals, vertex_normals, lumped_mass,
                    cotan_weights, cotan_laplacian, mesh_edges,
                    edge_face_counts, is_closed_manifold,
-                   remove_unreferenced_vertices, normalize_area)
+                   remove_unreferenced_vertices, normalize_area,
+                   laplacian_spectrum)
 from .sparse import to_scipy, from_scipy
 from .mls import mls_grad_div, build_mls_operators
 from .operators import SurfaceOperators
@@ -33,6 +34,7 @@ __all__ = [
     'is_closed_manifold',
     'remove_unreferenced_vertices',
     'normalize_area',
+    'laplacian_spectrum',
     'to_scipy',
     'from_scipy',
     'mls_grad_div',

@@ -6,11 +6,12 @@ outside), and ``pos`` is ``[N, 3]``.
 """
 from typing import Tuple
 
+import numpy as np
 import torch
 from torch import Tensor
 
 from ._checks import (check_faces, check_nondegenerate, check_points,
-                      check_positive_float)
+                      check_positive_float, check_positive_int)
 
 
 def _check_mesh(pos, face) -> Tuple[Tensor, Tensor]:
@@ -324,3 +325,38 @@ def normalize_area(pos: Tensor, face: Tensor, area: float = 1.0) -> Tensor:
         raise ValueError("the mesh has zero surface area; cannot normalise it")
     centroid = (face_area.unsqueeze(-1) * pos[face].mean(0)).sum(0) / total
     return (pos - centroid) * torch.sqrt(area / total)
+
+
+def laplacian_spectrum(pos: Tensor, face: Tensor,
+                       num_eigenvalues: int = 16) -> Tensor:
+    r"""The smallest non-zero eigenvalues of the cotan Laplacian,
+    :math:`S \phi = \lambda M \phi` (lumped :math:`M`), times the surface
+    area :math:`A` so that they do not depend on the shape's size: the
+    "Shape-DNA" descriptor of Reuter et al. (2006), invariant to isometric
+    (non-rigid) deformations. On the unit sphere, :math:`\lambda A = 4\pi
+    l(l + 1)` with multiplicity :math:`2l + 1`.
+
+    Uses shift-invert Lanczos (``scipy.sparse.linalg.eigsh``) in float64 on
+    the CPU; the mesh must be connected (a second zero eigenvalue would
+    appear in the output otherwise).
+
+    Shapes:
+        - **input:** pos :math:`(N, 3)`, face :math:`(3, F)`
+        - **output:** :math:`(\text{num\_eigenvalues})`, ascending
+    """
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as sla
+    from .sparse import to_scipy
+    pos, face = _check_mesh(pos, face)
+    num_eigenvalues = check_positive_int(num_eigenvalues, 'num_eigenvalues')
+    if num_eigenvalues + 2 > pos.size(0):
+        raise ValueError(f"'num_eigenvalues' is {num_eigenvalues} but the "
+                         f"mesh has only {pos.size(0)} vertices; ask for at "
+                         f"most {pos.size(0) - 2}")
+    pos = pos.detach().double().cpu()
+    face = face.cpu()
+    S = to_scipy(cotan_laplacian(pos, face))
+    mass = lumped_mass(pos, face).numpy()
+    values = sla.eigsh(S, k=num_eigenvalues + 1, M=sp.diags(mass),
+                       sigma=-1e-8, which='LM', return_eigenvectors=False)
+    return torch.from_numpy(np.sort(values)[1:] * mass.sum())

@@ -205,10 +205,11 @@ def draw_surface(path: str, pos, face=None, values=None, colors=None,
 
 def line_figure(path: str, series, title: str, xlabel: str, ylabel: str,
                 logy: bool = False, integer_x: bool = False,
-                ylim=None, hlines=()) -> str:
+                ylim=None, hlines=(), vlines=()) -> str:
     """A line plot of ``series`` (a list of ``(label, x, y, style)``) with
-    a title, axis labels and a legend; ``hlines`` adds labelled horizontal
-    reference lines ``(label, y, style)``. Saved atomically as PNG."""
+    a title, axis labels and a legend; ``hlines`` and ``vlines`` add
+    labelled horizontal and vertical reference lines ``(label, value,
+    linestyle)``. Saved atomically as PNG."""
     plt = _pyplot()
     from matplotlib.ticker import MaxNLocator
     fig, ax = plt.subplots(figsize=(5.6, 3.8))
@@ -216,6 +217,8 @@ def line_figure(path: str, series, title: str, xlabel: str, ylabel: str,
         ax.plot(x, y, style, label=label)
     for label, y, style in hlines:
         ax.axhline(y, linestyle=style, color='grey', label=label)
+    for label, x, style in vlines:
+        ax.axvline(x, linestyle=style, color='black', label=label)
     if logy:
         ax.set_yscale('log')
     if ylim is not None:

@@ -117,7 +117,7 @@ class FrequencySVBRDF(torch.nn.Module):
 
     @torch.no_grad()
     def clamp_(self):
-        """Projects the parameters back onto :math:`[0, 1]`, the roughness
+        r"""Projects the parameters back onto :math:`[0, 1]`, the roughness
         onto :math:`[\sqrt{\alpha_{min}}, 1]`: at 0 the gradient of
         :math:`\alpha = r^2` vanishes and a fit that got there would stay."""
         self.base_color.clamp_(0, 1)

@@ -1,0 +1,114 @@
+"""The command line as a whole: help, dispatch, one-line user errors,
+--debug, info, and the train sub-command."""
+import csv
+import json
+import subprocess
+import sys
+
+import pytest
+
+from tg_intrinsic.cli import COMMANDS, main
+
+
+def run_cli(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def assert_user_error(code, err, *needles):
+    assert code == 2
+    assert 'Traceback' not in err
+    lines = [line for line in err.strip().split('\n') if line]
+    assert len(lines) == 1, err
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+
+
+@pytest.mark.parametrize('command', COMMANDS)
+def test_every_command_has_help_with_a_worked_example(capsys, command):
+    with pytest.raises(SystemExit) as exit_info:
+        main([command, '--help'])
+    assert exit_info.value.code == 0
+    text = capsys.readouterr().out
+    assert 'example' in text and f'tg-intrinsic {command}' in text
+
+
+def test_python_dash_m_and_no_command():
+    result = subprocess.run([sys.executable, '-m', 'tg_intrinsic'],
+                            capture_output=True, text=True)
+    assert result.returncode == 2
+    assert all(command in result.stdout for command in COMMANDS)
+    result = subprocess.run([sys.executable, '-m', 'tg_intrinsic', 'nope'],
+                            capture_output=True, text=True)
+    assert result.returncode == 2
+    assert len(result.stderr.strip().split('\n')) == 1
+    assert "invalid choice: 'nope'" in result.stderr
+
+
+def test_info(capsys):
+    code, out, _ = run_cli(capsys, 'info')
+    assert code == 0
+    for name in ('torch', 'torch_geometric', 'tg_intrinsic', 'device',
+                 'potpourri3d', 'OpenEXR', 'mitsuba', 'torch_scatter'):
+        assert name in out
+    code, out, _ = run_cli(capsys, 'info', '--json')
+    info = json.loads(out)
+    assert code == 0 and set(info['extras']) == {
+        'potpourri3d', 'OpenEXR', 'mitsuba', 'torch_scatter'}
+
+
+@pytest.mark.parametrize('argv,needles', [
+    (['train', 'deltanet', '--epochs', '-3'], ['--epochs', 'at least 1']),
+    (['train', 'deltanet', '--lr', '0'], ['--lr', 'positive']),
+    (['train', 'deltanet', '--dataset', 'no/such/folder'],
+     ['no/such/folder', 'existing folder']),
+    (['train', 'resnet'], ["invalid choice: 'resnet'"]),
+    (['train', 'deltanet', '--epochs', 'many'], ['--epochs', 'many']),
+])
+def test_train_user_mistakes_end_in_one_line(capsys, argv, needles):
+    try:
+        code = main(argv)
+    except SystemExit as exit_info:  # argparse's own errors
+        code = exit_info.code
+    assert_user_error(code, capsys.readouterr().err, *needles)
+
+
+def test_train_writes_metrics_csv_and_curves(tmp_path, capsys):
+    code = main(['train', 'deltanet', '--dataset', 'synthetic-modelnet',
+                 '--root', str(tmp_path / 'data'), '--out',
+                 str(tmp_path / 'run'), '--num-points', '64',
+                 '--shapes-per-class', '2', '--batch-size', '8',
+                 '--conv-channels', '8', '--k', '6', '--epochs', '2',
+                 '--eval-every', '2', '--quiet'])
+    assert code == 0
+    rows = list(csv.DictReader(open(tmp_path / 'run' / 'metrics.csv')))
+    assert [int(r['epoch']) for r in rows] == [1, 2]
+    assert rows[0]['test_accuracy'] == '' and 0 <= float(
+        rows[1]['test_accuracy']) <= 1
+    assert (tmp_path / 'run' / 'learning_curve.png').stat().st_size > 0
+
+
+def test_a_mesh_folder_as_dataset(tmp_path, capsys):
+    import trimesh
+    for name, scale in (('ball', (1, 1, 1)), ('cigar', (3, 1, 1))):
+        for split in ('train', 'test'):
+            folder = tmp_path / 'meshes' / name / split
+            folder.mkdir(parents=True)
+            mesh = trimesh.creation.icosphere(1)
+            mesh.apply_scale(scale)
+            mesh.export(folder / f'{name}.off')
+    code = main(['train', 'deltanet', '--dataset', str(tmp_path / 'meshes'),
+                 '--out', str(tmp_path / 'run'), '--num-points', '64',
+                 '--batch-size', '2', '--conv-channels', '8', '--k', '6',
+                 '--epochs', '1', '--quiet'])
+    assert code == 0
+    metrics = json.loads((tmp_path / 'run' / 'metrics.json').read_text())
+    assert metrics['dataset'] == 'mesh_folder'
+
+
+def test_debug_shows_the_traceback(capsys):
+    with pytest.raises(ValueError, match='neither'):
+        main(['--debug', 'train', 'deltanet', '--dataset', 'missing'])
+    with pytest.raises(ValueError, match='neither'):
+        main(['train', 'deltanet', '--dataset', 'missing', '--debug'])

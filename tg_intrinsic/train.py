@@ -78,19 +78,22 @@ def build_datasets(name: str, root: str, num_points: int,
     raise ValueError(f"unknown dataset {name!r}; choose one of {DATASETS}")
 
 
-def hsn_pipeline(args):
-    """Mesh -> unit area, frames, geodesic discs with log map and
-    transport on two levels, harmonic precomputation (Harmonic Surface
-    Networks' setting: radii 0.2 and 0.4 on unit area, a quarter of the
-    points on level 1)."""
+def hsn_pipeline(radius: float = 0.2, rings: int = 6, max_order: int = 1,
+                 method: str = 'fast'):
+    """The precomputation Harmonic Surface Networks train on, shared by
+    ``train`` and ``tg-intrinsic precompute hsn``: mesh -> unit area,
+    frames, geodesic discs of :obj:`radius` with log map and transport on
+    two levels (a quarter of the points and twice the radius on level 1),
+    circular-harmonic terms with :obj:`rings` rings up to order
+    :obj:`max_order`; :obj:`method` is the log map method (``'fast'`` or
+    ``'vector_heat'``). The paper's setting: radius 0.2 on unit area."""
     from tg_intrinsic.transforms import (HarmonicPrecompute, LogMap,
                                          MultiscaleSupports, NormalizeArea)
     # LogMap writes the transport angles too (same solve).
     return Compose([NormalizeArea(),
-                    LogMap(args.radius, method=args.logmap_method),
-                    MultiscaleSupports([0.25], [2 * args.radius],
-                                       method=args.logmap_method),
-                    HarmonicPrecompute(args.rings, args.max_order)])
+                    LogMap(radius, method=method),
+                    MultiscaleSupports([0.25], [2 * radius], method=method),
+                    HarmonicPrecompute(rings, max_order)])
 
 
 def build_mesh_datasets(args):
@@ -129,7 +132,8 @@ def build_mesh_datasets(args):
     if os.path.exists(cache):
         train_items, test_items = torch.load(cache, weights_only=False)
         return train_items, test_items, num_classes
-    pipeline = hsn_pipeline(args)
+    pipeline = hsn_pipeline(args.radius, args.rings, args.max_order,
+                            args.logmap_method)
     out = []
     for split, dataset in zip(('train', 'test'), sets):
         items = [pipeline(dataset[i]) for i in tqdm(

@@ -7,7 +7,7 @@ import torch
 from scipy.sparse.linalg import spsolve
 from torch_geometric.data import Data
 
-from tg_intrinsic.solvers import poisson, smooth, stiffness_and_mass
+from tg_intrinsic.solvers import GravoMG, poisson, smooth, stiffness_and_mass
 
 from ..conftest import icosphere
 
@@ -74,3 +74,84 @@ def test_bad_input():
         smooth(data, 1e-2, y=data.x[:5])
     with pytest.raises(ValueError, match='nothing'):
         smooth(Data(pos=data.pos, face=data.face), 1e-2)
+
+
+def small_data(subdivisions=3, channels=3):
+    pos, face = icosphere(subdivisions)
+    g = torch.Generator().manual_seed(1)
+    return Data(pos=pos, face=face,
+                x=torch.randn(pos.size(0), channels, generator=g,
+                              dtype=torch.float64))
+
+
+def test_bilaplacian_smoothing_matches_a_direct_solve():
+    from tg_intrinsic.transforms import GravoHierarchy
+    data = small_data()
+    S, m = stiffness_and_mass(data)
+    alpha, beta = 1e-2, 1e-3
+    A = sp.diags(m) + alpha * S + beta * S @ sp.diags(1 / m) @ S
+    exact = direct(A, m, data.x)
+    # on a real hierarchy (642 points, two coarse levels), not a direct
+    # solve
+    solver = GravoMG.from_data(GravoHierarchy(lower_bound=20)(data))
+    out = smooth(data, alpha, beta=beta, solver=solver)
+    assert solver.info.direct is None and solver.info.iterations > 1
+    assert solver.info.converged and solver.info.residuals[-1] < 1e-8
+    assert np.abs(out.numpy() - exact).max() < 1e-6 * np.abs(exact).max()
+    # the bi-Laplacian term damps more than the Laplacian one alone
+    assert out.norm() < smooth(data, alpha, lower_bound=20).norm()
+    # alpha may be zero when beta is positive
+    exact = direct(sp.diags(m) + beta * S @ sp.diags(1 / m) @ S, m, data.x)
+    out = smooth(data, 0.0, beta=beta, lower_bound=20)
+    assert np.abs(out.numpy() - exact).max() < 1e-6 * np.abs(exact).max()
+
+
+def test_channels_are_one_block_solve_equal_to_per_channel_solves():
+    from tg_intrinsic.transforms import GravoHierarchy
+    data = small_data(channels=4)
+    hierarchy = GravoHierarchy(lower_bound=20)(data)
+    solver = GravoMG.from_data(hierarchy)
+    for problem, weight in ((smooth, 1e-2), (poisson, 1.0)):
+        block = problem(data, weight, solver=solver, tol=1e-10)
+        info = solver.info
+        # one solve: the residual history is the worst channel's
+        assert info.converged and info.iterations == len(info.residuals)
+        columns = torch.stack([problem(data, weight, y=data.x[:, k],
+                                       solver=solver, tol=1e-10)
+                               for k in range(4)], 1)
+        assert block.shape == data.x.shape
+        assert torch.allclose(block, columns, rtol=0, atol=1e-8 * float(
+            columns.abs().max()))
+
+
+def test_hierarchy_options_are_used_when_built_inside():
+    import warnings
+    data = small_data(channels=1)
+    # below the lower bound: one direct solve, nothing to warn about
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        smooth(data, 1e-2, lower_bound=5000, max_iter=1)
+    # with coarse levels one cycle does not reach 1e-8: it warns
+    with pytest.warns(RuntimeWarning, match='cycles'):
+        smooth(data, 1e-2, lower_bound=20, ratio=4.0, max_iter=1)
+    for cycle in ('W', 'F'):
+        out = poisson(data, 1.0, lower_bound=20, cycle=cycle)
+        S, m = stiffness_and_mass(data)
+        exact = direct(S + sp.diags(m), m, data.x)
+        assert np.abs(out.numpy() - exact).max() < 1e-6 * np.abs(exact).max()
+
+
+def test_bad_weights():
+    data = small_data(2)
+    for kwargs, name in ((dict(alpha=-1.0), 'alpha'),
+                         (dict(alpha=float('nan')), 'alpha'),
+                         (dict(alpha=1e-2, beta=-1.0), 'beta'),
+                         (dict(alpha=0.0, beta=0.0), 'alpha')):
+        with pytest.raises(ValueError, match=name):
+            smooth(data, **kwargs)
+    with pytest.raises(ValueError, match='eta'):
+        poisson(data, float('inf'))
+    bad = data.x.clone()
+    bad[3, 0] = float('nan')
+    with pytest.raises(ValueError, match='NaN'):
+        smooth(data, 1e-2, y=bad)

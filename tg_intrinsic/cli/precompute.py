@@ -1,11 +1,473 @@
-"""Placeholder (being written)."""
-HELP = 'placeholder'
-EXAMPLE = ''
+"""Precomputes what a model or solver needs for every mesh or point cloud
+in a folder (or one file), once, in parallel, resumably: DeltaConv
+operators (mls), geodesic discs with log map and transport (logmap), the
+whole Harmonic Surface Network pipeline training uses (hsn), or a Gravo MG
+hierarchy (gravo).
+
+Every OBJ/OFF/PLY/STL file under INPUT (recursively, sorted) becomes a
+PyG Data object saved with torch.save at the same relative path under
+OUTPUT, extension .pt (load it with torch.load(path, weights_only=False)).
+Files are written atomically, so a killed run leaves only whole files and
+the next run skips them; OUTPUT/precompute.json records the kind and the
+settings, and a rerun with other settings stops unless --overwrite. Files
+that fail are listed at the end and in OUTPUT/failures.json (exit code 2);
+the others are still written."""
+import inspect
+import json
+import os
+import textwrap
+import time
+import traceback
+from typing import Dict, List, Optional, Tuple
+
+from .common import (ArgumentParser, UsageError, common_options, one_line,
+                     positive_float, positive_int, nonnegative_float,
+                     nonnegative_int, progress)
+
+HELP = 'precompute operators, log maps or hierarchies for a folder of meshes'
+EXAMPLE = """examples:
+  tg-intrinsic precompute mls clouds/ cache/mls --k 20 --workers 4
+  tg-intrinsic precompute hsn meshes/ cache/hsn --radius 0.2 --rings 6
+  tg-intrinsic precompute logmap bunny.obj bunny_logmap.pt --radius 0.05
+  tg-intrinsic precompute gravo scans/ cache/gravo --ratio 8 --lower-bound 500
+
+Run "tg-intrinsic precompute KIND --help" for the options of each kind.
+Rerunning the same command resumes: files already written are skipped."""
+
+MANIFEST = 'precompute.json'
+FAILURES = 'failures.json'
+DTYPES = ('float32', 'float64')
+
+# kind: (help, description)
+KINDS = {
+    'mls': ('DeltaConv gradient and divergence (meshes and point clouds)',
+            "DeltaConv's moving-least-squares gradient and divergence on "
+            "the k-nn graph of the points (MLSOperators): edge_index, "
+            "frame, grad_weight, div_weight and normal. Normals come from "
+            "the PLY properties nx ny nz, else from the mesh, else are "
+            "estimated from the --normal-k nearest neighbours."),
+    'logmap': ('geodesic discs with log map and transport (meshes)',
+               "Geodesic discs of --radius around every vertex with the log "
+               "map of every neighbour and the parallel transport angle "
+               "(LogMap): edge_index, logmap, transport, area, frame. "
+               "Triangle meshes only."),
+    'hsn': ('the Harmonic Surface Network pipeline of training (meshes)',
+            "The precomputation Harmonic Surface Networks train on, the "
+            "same as 'tg-intrinsic train hsn': unit area, log maps and "
+            "transport on two levels (radius and twice the radius), "
+            "circular-harmonic terms (NormalizeArea, LogMap, "
+            "MultiscaleSupports, HarmonicPrecompute). Triangle meshes only."),
+    'gravo': ('a Gravo MG multigrid hierarchy (meshes and point clouds)',
+              "A Gravo MG hierarchy (GravoHierarchy) on the mesh edges, or "
+              "on the --k nearest neighbour graph of a point cloud: pos_l, "
+              "edge_index_l, prolong_index_l, prolong_weight_l, ... per "
+              "level."),
+}
+
+
+def default_of(function, name: str):
+    """The default of argument ``name`` of a library ``function`` (or
+    class): the library owns the value, the command line shows it."""
+    return inspect.signature(function).parameters[name].default
 
 
 def add_arguments(parser):
-    pass
+    from tg_intrinsic.geometry.logmap import METHODS
+    from tg_intrinsic.train import hsn_pipeline
+    from tg_intrinsic.transforms import (EstimateNormals, GravoHierarchy,
+                                         MLSOperators)
+    kinds = parser.add_subparsers(dest='kind', metavar='KIND', required=True,
+                                  parser_class=ArgumentParser)
+    for kind, (short, description) in KINDS.items():
+        sub = kinds.add_parser(kind, parents=[common_options()], help=short,
+                               description=textwrap.fill(
+                                   description, 78, break_on_hyphens=False),
+                               epilog=EXAMPLE,
+                               formatter_class=parser.formatter_class)
+        sub.add_argument('input', metavar='INPUT',
+                         help='a mesh or point cloud file, or a folder '
+                         'searched recursively for OBJ/OFF/PLY/STL files')
+        sub.add_argument('output', metavar='OUTPUT',
+                         help='the output folder (or, for one INPUT file, '
+                         'a .pt file)')
+        sub.add_argument('--workers', type=positive_int, default=1,
+                         help='files processed in parallel, one process '
+                         'and one thread each; the results do not depend on '
+                         'it (default: %(default)s)')
+        sub.add_argument('--overwrite', action='store_true',
+                         help='recompute every file, also those done, and '
+                         'replace the settings recorded in OUTPUT')
+        sub.add_argument('--dtype', choices=DTYPES, default='float32',
+                         help='floating type of the saved tensors and of '
+                         'the computation (default: %(default)s, what the '
+                         'models train in)')
+        if kind == 'mls':
+            sub.add_argument('--k', type=positive_int,
+                             default=default_of(MLSOperators, 'k'),
+                             help='neighbours of every point, itself '
+                             'included (default: %(default)s)')
+            sub.add_argument('--regularizer', type=nonnegative_float,
+                             default=default_of(MLSOperators, 'regularizer'),
+                             help='Tikhonov weight of the least-squares '
+                             'fits (default: %(default)s)')
+            sub.add_argument('--normal-k', type=positive_int,
+                             default=default_of(EstimateNormals, 'k'),
+                             help='neighbours for estimated normals '
+                             '(default: %(default)s)')
+        if kind in ('logmap', 'hsn'):
+            sub.add_argument('--radius', type=positive_float,
+                             default=default_of(hsn_pipeline, 'radius'),
+                             help='disc radius (default: %(default)s); '
+                             + ('on the unit-area mesh' if kind == 'hsn'
+                                else 'in mesh units, or on the unit-area '
+                                'mesh with --unit-area'))
+            sub.add_argument('--method', choices=METHODS,
+                             default=default_of(hsn_pipeline, 'method'),
+                             help="log map and transport: 'fast' (tangent "
+                             "projection rescaled to arc length) or "
+                             "'vector_heat' (default: %(default)s)")
+        if kind == 'logmap':
+            sub.add_argument('--unit-area', action='store_true',
+                             help='scale every mesh to unit area first')
+        if kind == 'hsn':
+            sub.add_argument('--rings', type=positive_int,
+                             default=default_of(hsn_pipeline, 'rings'),
+                             help='radial rings of the filters (default: '
+                             '%(default)s)')
+            sub.add_argument('--max-order', type=nonnegative_int,
+                             default=default_of(hsn_pipeline, 'max_order'),
+                             help='highest rotation order (default: '
+                             '%(default)s)')
+        if kind == 'gravo':
+            sub.add_argument('--ratio', type=positive_float,
+                             default=default_of(GravoHierarchy, 'ratio'),
+                             help='each level keeps about 1/RATIO of the '
+                             'points (default: %(default)s)')
+            sub.add_argument('--lower-bound', type=positive_int,
+                             default=default_of(GravoHierarchy,
+                                                'lower_bound'),
+                             help='smallest level size; smaller surfaces get '
+                             'no levels (default: %(default)s)')
+            sub.add_argument('--k', type=positive_int,
+                             default=default_of(GravoHierarchy, 'k'),
+                             help='neighbours of the graph of point clouds '
+                             '(default: %(default)s)')
+
+
+def settings_of(args) -> Dict:
+    """The settings a result depends on (recorded in the manifest)."""
+    names = {'mls': ('k', 'regularizer', 'normal_k'),
+             'logmap': ('radius', 'method', 'unit_area'),
+             'hsn': ('radius', 'rings', 'max_order', 'method'),
+             'gravo': ('ratio', 'lower_bound', 'k')}[args.kind]
+    return {'dtype': args.dtype, **{name: getattr(args, name)
+                                    for name in names}}
+
+
+# ----------------------------------------------------------------------
+# One file (runs in the worker processes; everything here is picklable)
+
+def transform_of(kind: str, settings: Dict):
+    """The transform that precomputes ``kind`` with ``settings``."""
+    from torch_geometric.transforms import Compose
+    from tg_intrinsic.transforms import (EstimateNormals, GravoHierarchy,
+                                         LogMap, MLSOperators, NormalizeArea)
+    if kind == 'mls':
+        return Compose([EstimateNormals(k=settings['normal_k']),
+                        MLSOperators(k=settings['k'],
+                                     regularizer=settings['regularizer'])])
+    if kind == 'logmap':
+        steps = [NormalizeArea()] if settings['unit_area'] else []
+        return Compose(steps + [LogMap(settings['radius'],
+                                       method=settings['method'])])
+    if kind == 'hsn':
+        from tg_intrinsic.train import hsn_pipeline
+        return hsn_pipeline(settings['radius'], settings['rings'],
+                            settings['max_order'], settings['method'])
+    if kind == 'gravo':
+        return GravoHierarchy(ratio=settings['ratio'],
+                              lower_bound=settings['lower_bound'],
+                              k=settings['k'])
+    raise ValueError(f"unknown kind {kind!r}; choose one of {list(KINDS)}")
+
+
+def load_surface(path: str, kind: str, dtype: str):
+    """Reads ``path`` into an :class:`~tg_intrinsic.data.IntrinsicData`
+    (``pos``, ``face`` for meshes, ``normal`` from PLY ``nx ny nz``) and
+    rejects what ``kind`` cannot handle."""
+    import numpy as np
+    import torch
+    from tg_intrinsic.data import IntrinsicData
+    from tg_intrinsic.io import read_surface
+    pos, face, properties = read_surface(path)
+    if face is None and kind in ('logmap', 'hsn'):
+        raise ValueError(f"'{path}' is a point cloud but {kind} needs a "
+                         f"triangle mesh (geodesic discs); use 'mls' or "
+                         f"'gravo' for point clouds")
+    if len(pos) < 2:
+        raise ValueError(f"'{path}' has only {len(pos)} point")
+    float_type = getattr(torch, dtype)
+    data = IntrinsicData(pos=torch.from_numpy(pos).to(float_type))
+    if face is not None:
+        data.face = torch.from_numpy(face).t().contiguous()
+    if all(name in properties for name in ('nx', 'ny', 'nz')):
+        normal = np.stack([properties[name] for name in ('nx', 'ny', 'nz')],
+                          1).astype(np.float64)
+        length = np.linalg.norm(normal, axis=1)
+        bad = ~np.isfinite(length) | (length < 1e-12)
+        if bad.any():
+            raise ValueError(f"'{path}' has {int(bad.sum())} zero, NaN or "
+                             f"infinite normal(s) in nx ny nz; repair them "
+                             f"or remove the properties to estimate normals")
+        data.normal = torch.from_numpy(normal / length[:, None]).to(
+            float_type)
+    return data
+
+
+def precompute_file(kind: str, settings: Dict, source: str, target: str):
+    """Precomputes one file and saves the result atomically."""
+    from tg_intrinsic.utils import atomic_torch_save
+    data = load_surface(source, kind, settings['dtype'])
+    data = transform_of(kind, settings)(data)
+    atomic_torch_save(data, target)
+
+
+def _work(task) -> Tuple[str, Optional[str], Optional[str]]:
+    """(source, reason or None, traceback of an unexpected error or None)."""
+    from tg_intrinsic.cli import USER_ERRORS
+    kind, settings, source, target = task
+    try:
+        precompute_file(kind, settings, source, target)
+        return source, None, None
+    except USER_ERRORS as error:  # a bad file: its message says why
+        return source, one_line(error), None
+    except Exception as error:  # noqa: BLE001 - reported per file
+        return (source, f"unexpected {type(error).__name__}: "
+                f"{one_line(error)}", traceback.format_exc())
+
+
+def _single_thread(threads: Tuple[int, int] = (1, 1)) -> Tuple[int, int]:
+    """One thread per file (torch and numba), in workers and in the main
+    process alike, so the results are the same whatever --workers is.
+    Returns the previous (torch, numba) thread counts."""
+    import numba
+    import torch
+    previous = (torch.get_num_threads(), numba.get_num_threads())
+    torch.set_num_threads(threads[0])
+    numba.set_num_threads(threads[1])
+    return previous
+
+
+# ----------------------------------------------------------------------
+# Files, manifest, pool
+
+def find_inputs(folder: str, skip: Optional[str] = None) -> List[str]:
+    """Every OBJ/OFF/PLY/STL file under ``folder``, recursively, sorted
+    (hidden files and folders and the folder ``skip`` left out)."""
+    from tg_intrinsic.io.mesh import MESH_EXTENSIONS
+    skip = os.path.realpath(skip) if skip else None
+    found = []
+    for root, dirs, files in os.walk(folder):
+        dirs[:] = sorted(d for d in dirs if not d.startswith('.') and
+                         os.path.realpath(os.path.join(root, d)) != skip)
+        for name in files:
+            if not name.startswith('.') and \
+                    os.path.splitext(name)[1].lower() in MESH_EXTENSIONS:
+                found.append(os.path.join(root, name))
+    return sorted(found, key=lambda p: os.path.relpath(p, folder))
+
+
+def plan(input_path: str, output: str) -> Tuple[List[Tuple[str, str]],
+                                                  bool]:
+    """The (source, target) pairs, and whether ``output`` is a folder
+    (with a manifest) rather than one .pt file."""
+    from tg_intrinsic.io.mesh import MESH_EXTENSIONS
+    if not os.path.exists(input_path):
+        raise FileNotFoundError(f"INPUT '{input_path}' does not exist")
+    if os.path.exists(output) and not os.path.isdir(output) and not \
+            (os.path.isfile(input_path) and output.lower().endswith('.pt')):
+        raise UsageError(f"OUTPUT '{output}' is a file; give a folder (or, "
+                         f"for one INPUT file, a .pt file)")
+    if os.path.isfile(input_path):
+        if os.path.splitext(input_path)[1].lower() not in MESH_EXTENSIONS:
+            raise UsageError(f"INPUT '{input_path}' is not a mesh or point "
+                             f"cloud file ({'/'.join(MESH_EXTENSIONS)})")
+        if output.lower().endswith('.pt'):
+            return [(input_path, output)], False
+        stem = os.path.splitext(os.path.basename(input_path))[0]
+        return [(input_path, os.path.join(output, stem + '.pt'))], True
+    if output.lower().endswith('.pt'):
+        raise UsageError(f"OUTPUT '{output}' is a .pt file but INPUT is a "
+                         f"folder; give an output folder")
+    sources = find_inputs(input_path, skip=output)
+    if not sources:
+        raise UsageError(f"INPUT '{input_path}' holds no "
+                         f"{'/'.join(MESH_EXTENSIONS)} files (searched "
+                         f"recursively)")
+    pairs, seen = [], {}
+    for source in sources:
+        rel = os.path.relpath(source, input_path)
+        target = os.path.join(output, os.path.splitext(rel)[0] + '.pt')
+        if target in seen:
+            raise UsageError(f"'{seen[target]}' and '{source}' would both be "
+                             f"written to '{target}'; rename one of them")
+        seen[target] = source
+        pairs.append((source, target))
+    return pairs, True
+
+
+def check_manifest(output: str, manifest: Dict, overwrite: bool,
+                   targets: List[str]):
+    """Stops when ``output`` was made with other settings (unless
+    ``overwrite``), then records ``manifest`` there."""
+    from tg_intrinsic.utils import atomic_write_json
+    path = os.path.join(output, MANIFEST)
+    if os.path.exists(path) and not overwrite:
+        try:
+            with open(path) as f:
+                old = json.load(f)
+            old_kind, old_settings = old['kind'], old['settings']
+        except (OSError, ValueError, KeyError, TypeError) as error:
+            raise UsageError(f"cannot read '{path}' ({one_line(error)}); "
+                             f"delete it or rerun with --overwrite") \
+                from None
+        if old_kind != manifest['kind'] or old_settings != \
+                manifest['settings']:
+            changes = [f"kind {old_kind} -> {manifest['kind']}"] \
+                if old_kind != manifest['kind'] else []
+            changes += [f"{key} {old_settings.get(key)!r} -> {value!r}"
+                        for key, value in manifest['settings'].items()
+                        if old_settings.get(key) != value]
+            raise UsageError(f"'{output}' was made with other settings "
+                             f"({', '.join(changes)}); rerun with --overwrite "
+                             f"to recompute every file, or give another "
+                             f"OUTPUT")
+    elif not overwrite and any(os.path.exists(t) for t in targets):
+        raise UsageError(f"'{output}' holds results but no {MANIFEST}, so "
+                         f"their settings are unknown; rerun with "
+                         f"--overwrite to recompute them, or give another "
+                         f"OUTPUT")
+    os.makedirs(output, exist_ok=True)
+    atomic_write_json(path, manifest)
+
+
+def _done(source: str, target: str) -> bool:
+    """A result written (atomically, so whole) after its input changed."""
+    return os.path.exists(target) and \
+        os.path.getmtime(target) >= os.path.getmtime(source)
+
+
+def _pool_context():
+    import multiprocessing
+    if 'forkserver' in multiprocessing.get_all_start_methods():
+        context = multiprocessing.get_context('forkserver')
+        # the server imports these once; every worker forks with them
+        context.set_forkserver_preload(['torch', 'torch_geometric',
+                                        'tg_intrinsic.transforms',
+                                        'tg_intrinsic.io'])
+        return context
+    return multiprocessing.get_context('spawn')
+
+
+def run_tasks(tasks, workers: int, quiet: bool, debug: bool, desc: str):
+    """Runs ``_work`` over ``tasks``; yields its results as they come."""
+    if workers == 1 or len(tasks) == 1:
+        threads = _single_thread()
+        try:
+            for task in progress(tasks, desc, quiet, unit='file'):
+                if debug:  # let the traceback through
+                    precompute_file(*task)
+                    yield task[2], None, None
+                else:
+                    yield _work(task)
+        finally:
+            _single_thread(threads)
+        return
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)),
+                               mp_context=_pool_context(),
+                               initializer=_single_thread)
+    try:
+        futures = {pool.submit(_work, task): task for task in tasks}
+        for future in progress(as_completed(futures), desc, quiet,
+                               total=len(futures), unit='file'):
+            try:
+                yield future.result()
+            except BrokenProcessPool:
+                yield (futures[future][2], 'its worker process died (out of '
+                       'memory? try fewer --workers)', None)
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
 
 
 def run(args):
-    raise NotImplementedError
+    import tg_intrinsic
+    from tg_intrinsic.utils import atomic_write_json
+    start = time.perf_counter()
+    if args.kind == 'gravo' and args.ratio <= 1:
+        raise UsageError(f"--ratio must be greater than 1 (each level keeps "
+                         f"about 1/RATIO of the points), got {args.ratio:g}")
+    pairs, folder = plan(args.input, args.output)
+    settings = settings_of(args)
+    if folder:
+        manifest = {'kind': args.kind, 'settings': settings,
+                    'format': 'torch.save of a torch_geometric Data '
+                    '(tg_intrinsic.data.IntrinsicData); load with '
+                    'torch.load(path, weights_only=False)',
+                    'input': os.path.abspath(args.input),
+                    'tg_intrinsic': tg_intrinsic.__version__}
+        check_manifest(args.output, manifest, args.overwrite,
+                       [target for _, target in pairs])
+    todo = [(s, t) for s, t in pairs
+            if not folder or args.overwrite or not _done(s, t)]
+    for _, target in todo:
+        os.makedirs(os.path.dirname(os.path.abspath(target)), exist_ok=True)
+    tasks = [(args.kind, settings, source, target) for source, target in todo]
+    failures = {}
+    for source, reason, trace in [] if not tasks else run_tasks(
+            tasks, args.workers, args.quiet, args.debug,
+            f'precompute {args.kind}'):
+        if reason is not None:
+            failures[source] = (reason, trace)
+    where = args.output if folder else os.path.dirname(
+        os.path.abspath(args.output))
+    failures_path = os.path.join(where, FAILURES)
+    seconds = time.perf_counter() - start
+    if failures:
+        names = [(source, os.path.relpath(source, args.input)
+                  if os.path.isdir(args.input) else source)
+                 for source, _ in pairs if source in failures]
+        if folder:
+            atomic_write_json(failures_path, [
+                dict(file=name, error=failures[source][0],
+                     **({'traceback': failures[source][1]}
+                        if failures[source][1] else {}))
+                for source, name in names])
+        listed = '; '.join(f"{name}: {failures[source][0]}"
+                           for source, name in names)
+        traces = any(trace for _, trace in failures.values())
+        if folder:
+            note = (f" (listed in {failures_path}"
+                    + (', with the tracebacks' if traces else '')
+                    + '; the other files are done, rerun to retry the '
+                    'failed ones)')
+        else:
+            note = ' (rerun with --debug for the traceback)' if traces \
+                else ''
+        raise UsageError(f"{len(failures)} of {len(pairs)} file(s) failed: "
+                         f"{listed}{note}")
+    if folder and os.path.exists(failures_path):
+        os.remove(failures_path)  # an earlier run's, now all done
+    if not args.quiet:
+        skipped = len(pairs) - len(todo)
+        if not todo:
+            print(f"nothing to do: all {skipped} file(s) are already done "
+                  f"in {args.output} (--overwrite recomputes them)")
+        else:
+            print(f"precomputed {args.kind} for {len(todo)} file(s)"
+                  + (f" (skipped {skipped} already done)" if skipped else '')
+                  + f" into {args.output} in {seconds:.1f} s")
+    return 0

@@ -1,11 +1,276 @@
-"""Placeholder (being written)."""
-HELP = 'placeholder'
-EXAMPLE = ''
+"""Smooths a signal on a mesh or point cloud, (M + alpha S) x = M y with an
+optional bi-Laplacian term beta S M^-1 S, or solves the screened Poisson
+problem (S + eta M) x = M y, with Gravo MG; S is the cotan Laplacian of a
+manifold mesh, else the robust Laplacian (point clouds, non-manifold
+meshes), M the lumped masses. Without --signal, --smooth smooths the
+vertex positions (implicit fairing).
+
+Writes to --out: result.ply (the surface, with the input signal and the
+result as vertex properties 'signal' and 'result', or 'signal_0..' and
+'result_0..' for several channels; after fairing the positions are the
+smoothed ones), result.png (the result drawn on the surface) and
+report.json (the problem, the Laplacian, the hierarchy, the residual of
+every cycle and the timings)."""
+import os
+import sys
+import time
+from contextlib import contextmanager
+
+from .common import (UsageError, output_folder,
+                     positive_float, positive_int)
+
+HELP = 'smooth a signal or solve a screened Poisson problem with Gravo MG'
+EXAMPLE = """examples:
+  tg-intrinsic solve bunny.obj --smooth 1e-3 --out runs/fair
+      # implicit fairing: smooths the vertex positions
+  tg-intrinsic solve bunny.obj --smooth 1e-3 --signal noisy.npy --out out
+  tg-intrinsic solve bunny.obj --smooth 1e-4 --bilaplacian 1e-6 \\
+      --signal noisy.npy --out out
+  tg-intrinsic solve scan.ply --poisson 10 --signal quality --out out
+      # 'quality' is a vertex property of scan.ply (a point cloud works)
+  tg-intrinsic solve bunny.obj --poisson 1 --signal f.ply:heat --tol 1e-10
+
+A signal is a .npy, .txt or .csv file with one row per vertex (one or more
+columns), FILE.ply:NAME (vertex property NAME of a PLY file with the same
+vertices) or NAME alone (a vertex property of MESH)."""
 
 
 def add_arguments(parser):
-    pass
+    from tg_intrinsic.solvers import smooth
+    from tg_intrinsic.solvers.gravo_mg import CYCLES
+    from .precompute import default_of
+    parser.add_argument('mesh', metavar='MESH',
+                        help='an OBJ, OFF, PLY or STL mesh or point cloud')
+    problem = parser.add_mutually_exclusive_group(required=True)
+    problem.add_argument('--smooth', type=positive_float, metavar='ALPHA',
+                         help='smooth: (M + ALPHA S) x = M y; ALPHA is a '
+                         'time step in squared length units of MESH')
+    problem.add_argument('--poisson', type=positive_float, metavar='ETA',
+                         help='screened Poisson: (S + ETA M) x = M y '
+                         '(needs --signal)')
+    parser.add_argument('--bilaplacian', type=positive_float, default=None,
+                        metavar='BETA', help='with --smooth: add BETA S M^-1 '
+                        'S (bi-Laplacian smoothing, which keeps more of the '
+                        'low frequencies)')
+    parser.add_argument('--signal', default=None, metavar='SOURCE',
+                        help='the signal y: FILE.npy/.txt/.csv, FILE.ply:NAME '
+                        'or a vertex property NAME of MESH (default with '
+                        '--smooth: the vertex positions)')
+    parser.add_argument('--out', default=None,
+                        help='output folder (default: runs/solve_<MESH name>)')
+    parser.add_argument('--tol', type=positive_float,
+                        default=default_of(smooth, 'tol'),
+                        help='relative residual |M y - A x| / |M y| to reach '
+                        'in every channel (default: %(default)s, far below '
+                        'what a figure or a float32 signal resolves, for a '
+                        'few cycles more than 1e-6)')
+    parser.add_argument('--max-cycles', type=positive_int,
+                        default=default_of(smooth, 'max_iter'),
+                        help='most multigrid cycles (default: %(default)s)')
+    parser.add_argument('--cycle', choices=CYCLES,
+                        default=default_of(smooth, 'cycle'),
+                        help='multigrid cycle (default: %(default)s)')
+    parser.add_argument('--ratio', type=positive_float,
+                        default=default_of(smooth, 'ratio'),
+                        help='hierarchy: points kept per level are about '
+                        '1/RATIO (default: %(default)s)')
+    parser.add_argument('--lower-bound', type=positive_int,
+                        default=default_of(smooth, 'lower_bound'),
+                        help='hierarchy: smallest level size; surfaces with '
+                        'fewer points are solved directly (default: '
+                        '%(default)s)')
+
+
+@contextmanager
+def _stage(name: str, quiet: bool, times: dict, key: str):
+    """Times a stage and prints it on stderr (progress, not the result)."""
+    if not quiet:
+        print(f"{name} ...", end='', file=sys.stderr, flush=True)
+    start = time.perf_counter()
+    try:
+        yield
+    except BaseException:
+        if not quiet:
+            print(' failed', file=sys.stderr, flush=True)
+        raise
+    times[key] = time.perf_counter() - start
+    if not quiet:
+        print(f" {times[key]:.2f} s", file=sys.stderr, flush=True)
+
+
+def _problem(args):
+    """(name, equation, parameters, title) of what is solved."""
+    if args.poisson is not None:
+        return ('poisson', '(S + eta M) x = M y', {'eta': args.poisson},
+                f'screened Poisson (S + {args.poisson:g} M) x = M y')
+    alpha, beta = args.smooth, args.bilaplacian
+    if beta is None:
+        name = 'fairing' if args.signal is None else 'smooth'
+        return (name, '(M + alpha S) x = M y', {'alpha': alpha},
+                f'{"fairing" if name == "fairing" else "smoothing"} '
+                f'(M + {alpha:g} S) x = M y')
+    name = 'bilaplacian fairing' if args.signal is None else \
+        'bilaplacian smooth'
+    return (name, '(M + alpha S + beta S M^-1 S) x = M y',
+            {'alpha': alpha, 'beta': beta},
+            f'{"fairing" if args.signal is None else "smoothing"} '
+            f'(M + {alpha:g} S + {beta:g} S M^-1 S) x = M y')
 
 
 def run(args):
-    raise NotImplementedError
+    import torch
+    from torch_geometric.data import Data
+
+    from tg_intrinsic.io import read_signal, read_surface, write_ply
+    from tg_intrinsic.io.figures import draw_surface
+    from tg_intrinsic.solvers import GravoMG, poisson, smooth
+    from tg_intrinsic.solvers.systems import uses_robust_laplacian
+    from tg_intrinsic.transforms import GravoHierarchy
+    from tg_intrinsic.utils import atomic_write_json
+
+    if args.bilaplacian is not None and args.smooth is None:
+        raise UsageError("--bilaplacian adds to --smooth ALPHA; give "
+                         "--smooth too")
+    if args.poisson is not None and args.signal is None:
+        raise UsageError("--poisson needs a right-hand side: give --signal "
+                         "SOURCE (a .npy/.txt/.csv file with one row per "
+                         "vertex, FILE.ply:NAME, or a vertex property of "
+                         "MESH)")
+    if args.ratio <= 1:
+        raise UsageError(f"--ratio must be greater than 1 (each level keeps "
+                         f"about 1/RATIO of the points), got {args.ratio:g}")
+    quiet = args.quiet
+    times = {}
+    start = time.perf_counter()
+    with _stage(f"reading {args.mesh}", quiet, times, 'read'):
+        pos, face, properties = read_surface(args.mesh)
+        n = len(pos)
+        y = pos.copy() if args.signal is None else \
+            read_signal(args.signal, n, properties)
+    out = output_folder(args.out or os.path.join(
+        'runs', 'solve_' + os.path.splitext(os.path.basename(
+            args.mesh))[0]))
+    name, equation, parameters, title = _problem(args)
+    data = Data(pos=torch.from_numpy(pos))
+    if face is not None:
+        data.face = torch.from_numpy(face).t().contiguous()
+    robust = uses_robust_laplacian(data)
+    if face is None:
+        laplacian = 'robust (point cloud)'
+    elif robust:
+        laplacian = 'robust (non-manifold mesh)'
+    else:
+        laplacian = 'cotan'
+
+    with _stage(f"building the hierarchy of {n} points", quiet, times,
+                'hierarchy'):
+        coarsen = GravoHierarchy(ratio=args.ratio,
+                                 lower_bound=args.lower_bound)
+        solver = GravoMG.from_data(coarsen(data))
+    sizes = [n] + [P.shape[1] for P in solver.prolongations]
+
+    channels = y.reshape(n, -1).shape[1]
+    with _stage(f"solving {equation} ({channels} channel(s))", quiet, times,
+                'total_solve'):
+        options = dict(y=torch.from_numpy(y), solver=solver, tol=args.tol,
+                       cycle=args.cycle, max_iter=args.max_cycles)
+        if args.poisson is not None:
+            x = poisson(data, args.poisson, **options)
+        else:
+            x = smooth(data, args.smooth, beta=args.bilaplacian or 0.0,
+                       **options)
+        x = x.numpy()
+    info = solver.info
+    times['setup'] = info.setup_time
+    times['solve'] = info.solve_time
+    # Laplacian, mass and system matrix: the rest of the solve stage.
+    times['assembly'] = max(times.pop('total_solve') - info.setup_time
+                            - info.solve_time, 0.0)
+
+    fairing = args.signal is None
+    ply_path = os.path.join(out, 'result.ply')
+    png_path = os.path.join(out, 'result.png')
+    with _stage('writing result.ply and result.png', quiet, times, 'write'):
+        write_ply(ply_path, x if fairing else pos, face,
+                  properties={'signal': y, 'result': x})
+        values, label, what = _drawn_values(x, y, fairing, args.signal)
+        draw_surface(png_path, x if fairing else pos, face, values=values,
+                     title=f'{title}\n{what}', label=label)
+    times['total'] = time.perf_counter() - start
+
+    report = {
+        'input': os.path.abspath(args.mesh),
+        'vertices': n,
+        'faces': int(len(face)) if face is not None else 'point cloud',
+        'laplacian': laplacian,
+        'problem': name,
+        'equation': equation,
+        'parameters': parameters,
+        'signal': args.signal or 'vertex positions',
+        'channels': channels,
+        # named as write_ply names them
+        'ply_properties': ['signal', 'result'] if channels == 1 else
+        [f'{key}_{k}' for key in ('signal', 'result')
+         for k in range(channels)],
+        'hierarchy': {'ratio': args.ratio, 'lower_bound': args.lower_bound,
+                      'graph': 'mesh edges' if face is not None else
+                      f'k-nearest neighbours (k = {coarsen.k})',
+                      'level_sizes': sizes},
+        'solver': {'cycle': args.cycle, 'tol': args.tol,
+                   'max_cycles': args.max_cycles,
+                   'cycles': info.iterations,
+                   'final_relative_residual': info.residuals[-1]
+                   if info.residuals else None,
+                   'residuals': list(info.residuals),
+                   'converged': bool(info.converged),
+                   'direct': info.direct},
+        'seconds': {key: round(float(value), 6)
+                    for key, value in times.items()},
+        'outputs': {'ply': ply_path, 'png': png_path},
+    }
+    atomic_write_json(os.path.join(out, 'report.json'), report)
+    if not quiet:
+        _summary(report, args.mesh, out)
+    return 0
+
+
+def _drawn_values(x, y, fairing: bool, signal):
+    """(per-vertex values, colour bar label, what they are) to draw."""
+    import numpy as np
+    if fairing:
+        return (np.linalg.norm(x - y, axis=1), 'distance moved (mesh units)',
+                'colour: distance each vertex moved')
+    name = os.path.basename(signal)
+    if x.ndim == 2 and x.shape[1] == 1:
+        x = x[:, 0]
+    if x.ndim == 1:
+        return x, f'result ({name})', f'colour: the result for {name}'
+    if x.shape[1] <= 3:
+        return (np.linalg.norm(x, axis=1), f'|result| ({name})',
+                f'colour: vector norm of the {x.shape[1]} result channels')
+    return (x[:, 0], f'result channel 0 ({name})',
+            f'colour: channel 0 of {x.shape[1]}')
+
+
+def _summary(report: dict, mesh: str, out: str):
+    solver = report['solver']
+    faces = report['faces']
+    shape = 'point cloud' if faces == 'point cloud' else f'{faces} faces'
+    weights = ', '.join(f'{k}={v:g}' for k, v in
+                        report['parameters'].items())
+    print(f"solved {report['equation']} ({weights}) on {mesh}: "
+          f"{report['vertices']} vertices, {shape}, {report['laplacian']} "
+          f"Laplacian")
+    levels = ' -> '.join(str(s) for s in report['hierarchy']['level_sizes'])
+    seconds = report['seconds']
+    if solver['direct']:
+        how = f"solved directly ({solver['direct']})"
+    else:
+        state = 'converged' if solver['converged'] else \
+            'NOT converged (raise --max-cycles or --tol)'
+        how = (f"{solver['cycles']} {solver['cycle']}-cycles to relative "
+               f"residual {solver['final_relative_residual']:.2g}, {state}")
+    print(f"  hierarchy {levels} ({seconds['hierarchy']:.2f} s); {how}; "
+          f"setup {seconds['setup']:.2f} s, solve {seconds['solve']:.2f} s")
+    print(f"  wrote {os.path.join(out, 'result.ply')}, result.png and "
+          f"report.json")

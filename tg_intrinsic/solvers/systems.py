@@ -1,7 +1,10 @@
 r"""Laplace-type systems on the surface of a :class:`~torch_geometric.data.
 Data` and their solution with :class:`GravoMG`: stiffness and mass
-matrices, smoothing :math:`(M + \alpha S) x = M y` and the screened Poisson
-problem :math:`(S + \eta M) x = M y`."""
+matrices, smoothing :math:`(M + \alpha S + \beta S M^{-1} S) x = M y` and
+the screened Poisson problem :math:`(S + \eta M) x = M y`."""
+import math
+import numbers
+import warnings
 from typing import Optional, Tuple
 
 import numpy as np
@@ -16,6 +19,20 @@ from tg_intrinsic.solvers.gravo_mg import GravoMG
 from tg_intrinsic.transforms.gravo_hierarchy import GravoHierarchy
 
 
+def uses_robust_laplacian(data, robust: Optional[bool] = None) -> bool:
+    """Whether :func:`stiffness_and_mass` takes the robust Laplacian for
+    ``data``: :obj:`robust` when given, else for point clouds (no
+    ``face``) and for meshes with an edge shared by more than two
+    triangles."""
+    if robust is not None:
+        return bool(robust)
+    face = getattr(data, 'face', None)
+    if face is None:
+        return True
+    pos = check_points(data.pos)
+    return bool((edge_face_counts(face, pos.size(0))[1] > 2).any())
+
+
 def stiffness_and_mass(data, robust: Optional[bool] = None
                        ) -> Tuple[sp.csr_matrix, np.ndarray]:
     r"""The positive semi-definite stiffness matrix :math:`S` and lumped
@@ -23,13 +40,10 @@ def stiffness_and_mass(data, robust: Optional[bool] = None
     manifold meshes, else (point clouds, non-manifold meshes, or
     ``robust=True``) the robust Laplacian of Sharp and Crane (2020,
     package ``robust-laplacian``), which stays well behaved on obtuse and
-    non-manifold triangles."""
+    non-manifold triangles (see :func:`uses_robust_laplacian`)."""
     pos = check_points(data.pos)
     face = getattr(data, 'face', None)
-    if robust is None:
-        robust = face is None or bool(
-            (edge_face_counts(face, pos.size(0))[1] > 2).any())
-    if not robust:
+    if not uses_robust_laplacian(data, robust):
         S = to_scipy(cotan_laplacian(pos.double().cpu(), face.cpu()))
         return S.tocsr(), lumped_mass(pos.double().cpu(), face.cpu()).numpy()
     try:
@@ -45,57 +59,140 @@ def stiffness_and_mass(data, robust: Optional[bool] = None
     return sp.csr_matrix(S), M.diagonal()
 
 
-def _solve(data, matrix, mass, y, solver, tol):
+def _solve(data, matrix, mass, y, solver, tol, ratio, lower_bound, cycle,
+           max_iter):
     y = data.x if y is None else y
     if y is None:
         raise ValueError("nothing to solve for: pass y or set data.x")
     values = y.detach().double().cpu().numpy()
-    if values.shape[0] != mass.size:
-        raise ValueError(f"'y' has {values.shape[0]} rows but the surface "
-                         f"has {mass.size} points")
+    if values.ndim not in (1, 2) or values.shape[0] != mass.size:
+        raise ValueError(f"'y' has shape {tuple(values.shape)} (rows: "
+                         f"{values.shape[0] if values.ndim else 0}) but the "
+                         f"surface has {mass.size} points; give (N) or "
+                         f"(N, C) with one row per point")
+    if not np.isfinite(values).all():
+        raise ValueError("'y' holds NaN or infinite values")
     if solver is None:
         if 'prolong_index_1' not in data:
-            data = GravoHierarchy()(data)
+            data = GravoHierarchy(ratio=ratio, lower_bound=lower_bound)(data)
         solver = GravoMG.from_data(data)
-    columns = values.reshape(mass.size, -1)
-    out = np.stack([solver.solve(matrix, mass * column, tol=tol)
-                    for column in columns.T], 1)  # a loop over channels
+    # All channels at once: one block solve, so solver.info describes it.
+    rhs = mass[:, None] * values.reshape(mass.size, -1)
+    out = solver.solve(matrix, rhs, tol=tol, cycle=cycle, max_iter=max_iter)
+    info = solver.info
+    if not info.converged:
+        warnings.warn(f"Gravo MG stopped after {info.iterations} cycles at "
+                      f"a relative residual of {info.residuals[-1]:.3g}, "
+                      f"above tol={tol:g}; allow more cycles (max_iter) or "
+                      f"a larger tolerance", RuntimeWarning, stacklevel=3)
     return torch.from_numpy(out.reshape(values.shape)).to(y.dtype).to(
         y.device)
 
 
+def _check_weight(value, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or \
+            not math.isfinite(value) or value < 0:
+        raise ValueError(f"'{name}' must be a finite number >= 0, got "
+                         f"{value!r}")
+    return float(value)
+
+
 def smooth(data, alpha: float, y: Optional[Tensor] = None,
            solver: Optional[GravoMG] = None, tol: float = 1e-8,
-           robust: Optional[bool] = None) -> Tensor:
+           robust: Optional[bool] = None, beta: float = 0.0,
+           ratio: float = 8.0, lower_bound: int = 1000, cycle: str = 'V',
+           max_iter: int = 100) -> Tensor:
     r"""Implicit smoothing of the signal :math:`y` (default ``data.x``,
-    :math:`(N)` or :math:`(N, C)`):
+    :math:`(N)` or :math:`(N, C)`) with Laplacian and, for
+    :math:`\beta > 0`, bi-Laplacian terms:
 
     .. math::
-        (M + \alpha S)\, x = M y,
+        (M + \alpha S + \beta S M^{-1} S)\, x = M y,
 
-    solved with Gravo MG on the hierarchy of ``data`` (built with
-    :class:`~tg_intrinsic.transforms.GravoHierarchy` when absent) or with
-    the given :obj:`solver`."""
-    if not alpha > 0:
-        raise ValueError(f"'alpha' must be positive, got {alpha!r}")
+    with the stiffness matrix :math:`S` and lumped masses :math:`M` of
+    :func:`stiffness_and_mass`. One implicit step of the heat flow for
+    :math:`\beta = 0` (implicit fairing when :math:`y` is ``data.pos``);
+    the bi-Laplacian term damps high frequencies like
+    :math:`\beta \lambda^2` instead of :math:`\alpha \lambda`, keeping more
+    of the low ones. All :math:`C` channels are solved as one block with
+    Gravo MG on the hierarchy of ``data`` (built with
+    :class:`~tg_intrinsic.transforms.GravoHierarchy` with :obj:`ratio`
+    and :obj:`lower_bound` when absent) or with the given :obj:`solver`,
+    whose :attr:`~GravoMG.info` then describes the whole solve. A solve
+    that does not reach :obj:`tol` warns.
+
+    Args:
+        data (Data): ``pos`` :math:`(N, 3)`, ``face`` :math:`(3, F)` for a
+            mesh (else a point cloud), optionally ``x`` and a hierarchy.
+        alpha (float): Laplacian weight :math:`\alpha \geq 0` (time step).
+        y (Tensor, optional): The signal; default ``data.x``.
+        solver (GravoMG, optional): A solver on the points of ``data``.
+        tol (float, optional): Relative residual to reach in every
+            channel. (default: :obj:`1e-8`)
+        robust (bool, optional): Force (or forbid) the robust Laplacian;
+            default: :func:`uses_robust_laplacian`.
+        beta (float, optional): Bi-Laplacian weight :math:`\beta \geq 0`;
+            :math:`\alpha` may be zero when it is positive.
+            (default: :obj:`0.0`)
+        ratio (float, optional): Hierarchy reduction per level, when it is
+            built here. (default: :obj:`8.0`)
+        lower_bound (int, optional): Smallest hierarchy level, when it is
+            built here; fewer points are solved directly.
+            (default: :obj:`1000`)
+        cycle (str, optional): ``'V'``, ``'W'`` or ``'F'``.
+            (default: :obj:`'V'`)
+        max_iter (int, optional): Most cycles. (default: :obj:`100`)
+
+    Shapes:
+        - **input:** ``y`` :math:`(N)` or :math:`(N, C)`
+        - **output:** :math:`x` of the shape, dtype and device of ``y``
+    """
+    alpha, beta = _check_weight(alpha, 'alpha'), _check_weight(beta, 'beta')
+    if alpha == 0 and beta == 0:
+        raise ValueError("'alpha' must be positive (or zero with a positive "
+                         "'beta'), got 0")
     S, m = stiffness_and_mass(data, robust)
-    return _solve(data, (sp.diags(m) + alpha * S).tocsr(), m, y, solver,
-                  tol)
+    if not (m > 0).all():
+        raise ValueError(f"{int((m <= 0).sum())} point(s) have no area, so "
+                         f"M is singular; remove unreferenced vertices and "
+                         f"degenerate triangles")
+    A = sp.diags(m) + alpha * S
+    if beta > 0:
+        A = A + beta * (S @ sp.diags(1.0 / m) @ S)
+        A = 0.5 * (A + A.T)  # exactly symmetric despite rounding
+    return _solve(data, A.tocsr(), m, y, solver, tol, ratio, lower_bound,
+                  cycle, max_iter)
 
 
 def poisson(data, eta: float, y: Optional[Tensor] = None,
             solver: Optional[GravoMG] = None, tol: float = 1e-8,
-            robust: Optional[bool] = None) -> Tensor:
+            robust: Optional[bool] = None, ratio: float = 8.0,
+            lower_bound: int = 1000, cycle: str = 'V',
+            max_iter: int = 100) -> Tensor:
     r"""The screened Poisson problem with right-hand side :math:`y`
-    (default ``data.x``):
+    (default ``data.x``, :math:`(N)` or :math:`(N, C)`):
 
     .. math::
         (S + \eta M)\, x = M y,
 
-    with :math:`\eta > 0` (without it :math:`S` is singular), solved as in
-    :func:`smooth`."""
-    if not eta > 0:
+    with :math:`\eta > 0` (without it :math:`S` is singular), solved as
+    one block as in :func:`smooth`, whose arguments :obj:`solver`,
+    :obj:`tol`, :obj:`robust`, :obj:`ratio`, :obj:`lower_bound`,
+    :obj:`cycle` and :obj:`max_iter` mean the same here.
+
+    Args:
+        data (Data): As in :func:`smooth`.
+        eta (float): Screening weight :math:`\eta > 0`.
+        y (Tensor, optional): The right-hand side; default ``data.x``.
+
+    Shapes:
+        - **input:** ``y`` :math:`(N)` or :math:`(N, C)`
+        - **output:** :math:`x` of the shape, dtype and device of ``y``
+    """
+    if isinstance(eta, bool) or not isinstance(eta, numbers.Real) or \
+            not math.isfinite(eta) or not eta > 0:
         raise ValueError(f"'eta' must be positive (S alone is singular), "
                          f"got {eta!r}")
     S, m = stiffness_and_mass(data, robust)
-    return _solve(data, (S + eta * sp.diags(m)).tocsr(), m, y, solver, tol)
+    return _solve(data, (S + eta * sp.diags(m)).tocsr(), m, y, solver, tol,
+                  ratio, lower_bound, cycle, max_iter)

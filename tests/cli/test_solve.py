@@ -1,0 +1,287 @@
+"""tg-intrinsic solve: outputs against the library called directly and a
+direct scipy solve, fairing, bi-Laplacian, point clouds, and every bad
+input ending in one line with exit code 2."""
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import torch
+import trimesh
+from scipy.sparse.linalg import spsolve
+from torch_geometric.data import Data
+
+from tg_intrinsic.cli import main
+from tg_intrinsic.io import read_surface, write_ply
+from tg_intrinsic.solvers import poisson, smooth, stiffness_and_mass
+
+# 162 vertices: ratio 4 and lower bound 10 give levels 162 -> 42 -> 10
+HIERARCHY = ['--ratio', '4', '--lower-bound', '10']
+
+
+def cli(argv, capsys):
+    """Runs the command line: (exit code, stdout, stderr)."""
+    try:
+        code = main(argv)
+    except SystemExit as error:  # argparse rejects a value
+        code = error.code
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture(scope='module')
+def files(tmp_path_factory):
+    root = tmp_path_factory.mktemp('solve')
+    mesh = trimesh.creation.icosphere(2)
+    rng = np.random.default_rng(0)
+    signal = rng.normal(size=(162, 2))
+    heat = rng.normal(size=162)
+    paths = {'obj': str(root / 'sphere.obj'), 'npy': str(root / 'y.npy'),
+             'ply': str(root / 'sphere.ply'),
+             'cloud': str(root / 'cloud.ply'),
+             'short': str(root / 'short.npy')}
+    mesh.export(paths['obj'])
+    pos, face, _ = read_surface(paths['obj'])  # as the OBJ stores them
+    np.save(paths['npy'], signal)
+    np.save(paths['short'], signal[:10])
+    write_ply(paths['ply'], pos, face, properties={'heat': heat})
+    cloud = rng.normal(size=(200, 3))
+    cloud /= np.linalg.norm(cloud, axis=1, keepdims=True)
+    write_ply(paths['cloud'], cloud, properties={'quality': cloud[:, 2]})
+    bad = {'garbage.off': 'this is not a mesh\n',
+           'nan.off': 'OFF\n3 1 0\n0 0 0\nnan 0 0\n0 1 0\n3 0 1 2\n',
+           'past.off': 'OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n'}
+    for name, text in bad.items():
+        (root / name).write_text(text)
+        paths[name] = str(root / name)
+    return paths, pos, face, signal, heat
+
+
+def mesh_data(pos, face):
+    return Data(pos=torch.from_numpy(pos),
+                face=torch.from_numpy(face).t().contiguous())
+
+
+def test_smooth_signal_outputs_and_report(files, tmp_path, capsys):
+    paths, pos, face, signal, _ = files
+    out = str(tmp_path / 'out')
+    code, stdout, stderr = cli(['solve', paths['obj'], '--smooth', '1e-2',
+                                '--signal', paths['npy'], '--out', out]
+                               + HIERARCHY, capsys)
+    assert code == 0, stderr
+    assert 'building the hierarchy' in stderr and 'solving' in stderr
+    assert 'solved (M + alpha S) x = M y' in stdout and 'cotan' in stdout
+    for name in ('result.ply', 'result.png', 'report.json'):
+        assert os.path.getsize(os.path.join(out, name)) > 0
+    # The PLY round-trips with the input signal and the result.
+    ply_pos, ply_face, props = read_surface(os.path.join(out, 'result.ply'))
+    assert np.array_equal(ply_pos, pos) and np.array_equal(ply_face, face)
+    result = np.stack([props['result_0'], props['result_1']], 1)
+    assert np.array_equal(np.stack([props['signal_0'], props['signal_1']],
+                                   1), signal)
+    # ... equal to the library called directly
+    direct = smooth(mesh_data(pos, face), 1e-2, y=torch.from_numpy(signal),
+                    ratio=4.0, lower_bound=10).numpy()
+    assert np.abs(result - direct).max() < 1e-12
+    with open(os.path.join(out, 'report.json')) as f:
+        report = json.load(f)
+    assert report['input'] == os.path.abspath(paths['obj'])
+    assert (report['vertices'], report['faces']) == (162, 320)
+    assert report['laplacian'] == 'cotan' and report['problem'] == 'smooth'
+    assert report['parameters'] == {'alpha': 1e-2}
+    assert report['channels'] == 2
+    assert report['hierarchy']['level_sizes'] == [162, 42, 10]
+    solver = report['solver']
+    assert solver['converged'] and solver['direct'] is None
+    assert solver['cycles'] == len(solver['residuals']) >= 2
+    assert solver['final_relative_residual'] == solver['residuals'][-1] \
+        < 1e-8
+    assert {'hierarchy', 'setup', 'solve', 'total'} <= set(report['seconds'])
+
+
+def test_fairing_is_the_default_for_smooth(files, tmp_path, capsys):
+    paths, pos, face, _, _ = files
+    out = str(tmp_path / 'fair')
+    code, stdout, stderr = cli(['--quiet', 'solve', paths['obj'], '--smooth',
+                                '1e-2', '--out', out], capsys)
+    assert code == 0, stderr
+    assert stdout == '' and stderr == ''  # --quiet
+    faired, ply_face, props = read_surface(os.path.join(out, 'result.ply'))
+    direct = smooth(mesh_data(pos, face), 1e-2,
+                    y=torch.from_numpy(pos)).numpy()
+    assert np.abs(faired - direct).max() < 1e-12  # smoothed positions
+    assert np.array_equal(ply_face, face)
+    assert np.array_equal(np.stack([props[f'signal_{k}'] for k in range(3)],
+                                   1), pos)
+    assert np.linalg.norm(faired, axis=1).mean() < 1  # it shrinks
+    with open(os.path.join(out, 'report.json')) as f:
+        report = json.load(f)
+    assert report['problem'] == 'fairing'
+    assert report['signal'] == 'vertex positions'
+    # 162 points are below the default lower bound: one direct solve
+    assert report['hierarchy']['level_sizes'] == [162]
+    assert report['solver']['direct'] and report['solver']['converged']
+
+
+def test_bilaplacian_matches_a_direct_solve(files, tmp_path, capsys):
+    paths, pos, face, signal, _ = files
+    out = str(tmp_path / 'bi')
+    code, _, stderr = cli(['--quiet', 'solve', paths['obj'], '--smooth',
+                           '1e-2', '--bilaplacian', '1e-3', '--signal',
+                           paths['npy'], '--out', out, '--cycle', 'W']
+                          + HIERARCHY, capsys)
+    assert code == 0, stderr
+    _, _, props = read_surface(os.path.join(out, 'result.ply'))
+    result = np.stack([props['result_0'], props['result_1']], 1)
+    S, m = stiffness_and_mass(mesh_data(pos, face))
+    A = (sp.diags(m) + 1e-2 * S + 1e-3 * S @ sp.diags(1 / m) @ S).tocsc()
+    exact = np.stack([spsolve(A, m * c) for c in signal.T], 1)
+    assert np.abs(result - exact).max() < 1e-6 * np.abs(exact).max()
+    with open(os.path.join(out, 'report.json')) as f:
+        report = json.load(f)
+    assert report['problem'] == 'bilaplacian smooth'
+    assert report['parameters'] == {'alpha': 1e-2, 'beta': 1e-3}
+    assert report['solver']['cycle'] == 'W'
+
+
+@pytest.mark.parametrize('source', ['heat', 'PLY:heat'])
+def test_poisson_solution_satisfies_the_system(files, tmp_path, capsys,
+                                               source):
+    paths, pos, face, _, heat = files
+    source = source.replace('PLY', paths['ply'])
+    out = str(tmp_path / 'poisson')
+    code, _, stderr = cli(['--quiet', 'solve', paths['ply'], '--poisson',
+                           '2.5', '--signal', source, '--out', out,
+                           '--tol', '1e-9', '--cycle', 'F'] + HIERARCHY,
+                          capsys)
+    assert code == 0, stderr
+    _, _, props = read_surface(os.path.join(out, 'result.ply'))
+    x = props['result']
+    assert np.array_equal(props['signal'], heat)
+    S, m = stiffness_and_mass(mesh_data(pos, face))
+    rhs = m * heat
+    assert np.linalg.norm(rhs - (S + 2.5 * sp.diags(m)) @ x) <= \
+        1e-9 * np.linalg.norm(rhs)
+    direct = poisson(mesh_data(pos, face), 2.5, y=torch.from_numpy(heat),
+                     tol=1e-9, ratio=4.0, lower_bound=10, cycle='F')
+    assert np.abs(x - direct.numpy()).max() < 1e-12
+
+
+def test_point_cloud_uses_the_robust_laplacian(files, tmp_path, capsys):
+    paths = files[0]
+    out = str(tmp_path / 'cloud')
+    code, stdout, stderr = cli(['solve', paths['cloud'], '--smooth', '1e-2',
+                                '--signal', 'quality', '--out', out,
+                                '--lower-bound', '20', '--ratio', '4'],
+                               capsys)
+    assert code == 0, stderr
+    assert 'point cloud' in stdout and 'robust' in stdout
+    cloud, face, props = read_surface(os.path.join(out, 'result.ply'))
+    assert face is None and cloud.shape == (200, 3)
+    with open(os.path.join(out, 'report.json')) as f:
+        report = json.load(f)
+    assert report['faces'] == 'point cloud'
+    assert report['laplacian'].startswith('robust')
+    assert report['hierarchy']['graph'].startswith('k-nearest')
+    assert len(report['hierarchy']['level_sizes']) >= 2
+    assert report['solver']['converged']
+    direct = smooth(Data(pos=torch.from_numpy(cloud)), 1e-2,
+                    y=torch.from_numpy(props['signal'].copy()), ratio=4.0,
+                    lower_bound=20)
+    assert np.abs(props['result'] - direct.numpy()).max() < 1e-12
+
+
+def test_one_column_signal_is_one_property(files, tmp_path, capsys):
+    paths, _, _, signal, _ = files
+    column = str(tmp_path / 'column.npy')
+    np.save(column, signal[:, :1])  # (N, 1)
+    out = str(tmp_path / 'column')
+    code, _, stderr = cli(['--quiet', 'solve', paths['obj'], '--poisson',
+                           '1', '--signal', column, '--out', out], capsys)
+    assert code == 0, stderr
+    with open(os.path.join(out, 'report.json')) as f:
+        report = json.load(f)
+    assert report['channels'] == 1
+    assert report['ply_properties'] == ['signal', 'result']
+    _, _, props = read_surface(os.path.join(out, 'result.ply'))
+    assert {'signal', 'result'} <= set(props)
+
+
+def test_a_solve_that_does_not_converge_warns(files, tmp_path, capsys):
+    paths = files[0]
+    out = str(tmp_path / 'short')
+    code, stdout, stderr = cli(['solve', paths['obj'], '--smooth', '1e-2',
+                                '--signal', paths['npy'], '--out', out,
+                                '--max-cycles', '1'] + HIERARCHY, capsys)
+    assert code == 0, stderr
+    assert 'tg-intrinsic: warning: Gravo MG stopped after 1 cycles' in stderr
+    assert 'NOT converged' in stdout
+    with open(os.path.join(out, 'report.json')) as f:
+        solver = json.load(f)['solver']
+    assert not solver['converged'] and solver['cycles'] == 1
+    assert solver['final_relative_residual'] > 1e-8
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['MISSING', '--smooth', '1'], 'does not exist'),
+    (['garbage.off', '--smooth', '1'], 'could not read'),
+    (['nan.off', '--smooth', '1'], 'NaN'),
+    (['past.off', '--smooth', '1'], 'face indices outside'),
+    (['obj', '--smooth', '-1'], 'argument --smooth: must be greater than 0'),
+    (['obj', '--smooth', '0'], 'argument --smooth: must be greater than 0'),
+    (['obj', '--poisson', '0', '--signal', 'npy'],
+     'argument --poisson: must be greater than 0'),
+    (['obj', '--smooth', 'nan'], 'must be finite'),
+    (['obj', '--smooth', '1', '--signal', 'short'], '162 vertices'),
+    (['obj', '--poisson', '1'], '--poisson needs a right-hand side'),
+    (['obj', '--poisson', '1', '--signal', 'npy', '--bilaplacian', '1'],
+     '--bilaplacian adds to --smooth'),
+    (['obj', '--smooth', '1', '--signal', 'no_such_property'],
+     'neither'),
+    (['obj', '--smooth', '1', '--ratio', '0.5'], '--ratio must be greater'),
+    (['obj'], 'one of the arguments --smooth --poisson is required'),
+])
+def test_bad_input_is_one_line_and_exit_code_2(files, tmp_path, capsys,
+                                               argv, message):
+    paths = files[0]
+    argv = [paths.get(a, a) if not a.startswith('-') else a for a in argv]
+    argv = [str(tmp_path / 'missing.obj') if a == 'MISSING' else a
+            for a in argv]
+    code, stdout, stderr = cli(['--quiet', 'solve'] + argv
+                               + ['--out', str(tmp_path / 'out')], capsys)
+    assert code == 2
+    assert 'Traceback' not in stderr and stdout == ''
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1, stderr
+    assert lines[0].startswith('tg-intrinsic solve: error:')
+    assert message in lines[0]
+
+
+def test_bad_input_progress_lines_end_cleanly(files, tmp_path, capsys):
+    # without --quiet the failed stage is closed before the error line
+    code, _, stderr = cli(['solve', files[0]['nan.off'], '--smooth', '1',
+                           '--out', str(tmp_path)], capsys)
+    assert code == 2
+    lines = stderr.strip().splitlines()
+    assert lines[-2].endswith('failed')
+    assert lines[-1].startswith('tg-intrinsic solve: error:')
+
+
+def test_as_a_subprocess(files, tmp_path):
+    # one run (starting Python with torch takes seconds); the exit codes of
+    # bad input are those of main() above, which the entry point exits with
+    paths = files[0]
+    out = str(tmp_path / 'sub')
+    done = subprocess.run(
+        [sys.executable, '-m', 'tg_intrinsic', 'solve', paths['obj'],
+         '--smooth', '1e-2', '--signal', paths['npy'], '--out', out]
+        + HIERARCHY, capture_output=True, text=True, timeout=300,
+        env=dict(os.environ, OMP_NUM_THREADS='1'))
+    assert done.returncode == 0, done.stderr
+    assert 'Traceback' not in done.stderr
+    assert done.stdout.startswith('solved (M + alpha S) x = M y')
+    assert sorted(os.listdir(out)) == ['report.json', 'result.ply',
+                                       'result.png']

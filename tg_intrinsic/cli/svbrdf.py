@@ -1,11 +1,440 @@
-"""Placeholder (being written)."""
-HELP = 'placeholder'
-EXAMPLE = ''
+"""Recovers a spatially varying BRDF (base colour, metallic, roughness) and
+its uncertainty (the normalised entropy of the power-spectrum likelihood)
+on every point of a surface from calibrated linear HDR photographs under a
+known environment map, with frequency-domain SVBRDF recovery (Wiersma et
+al., SIGGRAPH 2025): ProjectViews, FitSphericalHarmonics,
+SpectralUncertainty, then FrequencySVBRDF.fit. --write-example DIR writes
+a small synthetic scene folder (with its ground truth) to start from.
+
+Writes to --out: maps.npz (base_color [N, 3], metallic, roughness,
+entropy [N]), one PLY per map (the surface with the map as a vertex
+property: base_color_0..2 (linear), metallic, roughness, entropy; as vertex
+colours: the base colour sRGB-encoded, the others through the colormap of
+their figure; normals as nx ny nz), one PNG per map drawn on the surface
+with a colour bar, and report.json (points, views, observations per
+point, seconds per stage, losses, mean entropy, and errors against
+ground_truth.npz when the scene folder has one). Every file is written
+atomically."""
+import inspect
+import os
+import sys
+import time
+from contextlib import contextmanager
+
+from .common import (UsageError, nonnegative_float, nonnegative_int,
+                     output_folder, positive_int)
+
+HELP = 'recover SVBRDF maps and their uncertainty from HDR photographs'
+
+MAP_NAMES = ('base_color', 'metallic', 'roughness', 'entropy')
+SPECULAR_MODELS = ('eq5.11', 'split_sum')
+# SH degree per specular model when --l-max is not given: the paper's
+# eq. 5.11 at FitSphericalHarmonics' default, the split sum at 8 (as in
+# benchmarks/svbrdf_accuracy.py and the README's results)
+SPLIT_SUM_L_MAX = 8
+# the synthetic example: an icosphere of 642 vertices seen by 24 cameras
+EXAMPLE_SUBDIVISIONS = 3
+EXAMPLE_VIEWS = 24
+EXAMPLE_IMAGE_SIZE = 96
+
+
+def _indent(text: str) -> str:
+    return '\n'.join('  ' + line if line else '' for line in text.split('\n'))
+
+
+def _scene_format() -> str:
+    from tg_intrinsic.io.scene import FORMAT
+    return FORMAT
+
+
+EXAMPLE = f"""examples:
+  tg-intrinsic svbrdf --write-example scene     # a synthetic scene to start
+  tg-intrinsic svbrdf scene --out runs/svbrdf   # maps, PLYs, PNGs, report
+  tg-intrinsic svbrdf scene --specular-model split_sum --steps 300
+  tg-intrinsic svbrdf my_capture --metallic 1 --tv-weight 0.01 --device cuda
+
+the scene folder (SCENE_DIR):
+{_indent(_scene_format())}"""
+
+
+def _unit_float(text: str) -> float:
+    """argparse type: a number in [0, 1]."""
+    import argparse
+    value = nonnegative_float(text)
+    if value > 1:
+        raise argparse.ArgumentTypeError(f"must lie in [0, 1], got {text!r}")
+    return value
+
+
+def _default(function, name):
+    """The library's default of one argument (the library owns it)."""
+    return inspect.signature(function).parameters[name].default
 
 
 def add_arguments(parser):
-    pass
+    from tg_intrinsic.nn import FrequencySVBRDF
+    from tg_intrinsic.transforms import FitSphericalHarmonics
+    steps = _default(FrequencySVBRDF.fit, 'steps')
+    tv_weight = _default(FrequencySVBRDF.fit, 'tv_weight')
+    l_max = _default(FitSphericalHarmonics.__init__, 'l_max')
+    parser.add_argument('scene', nargs='?', metavar='SCENE_DIR',
+                        help='the scene folder (format below)')
+    parser.add_argument('--out', default=None, metavar='DIR',
+                        help='output folder (default: runs/svbrdf_<SCENE_DIR'
+                        ' name>)')
+    parser.add_argument('--steps', type=nonnegative_int, default=steps,
+                        metavar='N',
+                        help=f'Adam steps of the fit; 0 keeps the spectrum '
+                        f'grid-search start (default: {steps}, the '
+                        f'library\'s)')
+    parser.add_argument('--l-max', type=positive_int, default=None,
+                        metavar='L',
+                        help=f'spherical-harmonic degree of the light and '
+                        f'the observations (default: {l_max} for eq5.11, '
+                        f'{SPLIT_SUM_L_MAX} for split_sum)')
+    parser.add_argument('--specular-model', choices=SPECULAR_MODELS,
+                        default=SPECULAR_MODELS[0],
+                        help='eq5.11: the paper\'s model; split_sum: '
+                        'prefiltered light times the GGX directional albedo,'
+                        ' more accurate (default: eq5.11)')
+    parser.add_argument('--metallic', type=_unit_float, default=None,
+                        metavar='M', help='hold metallic at M (1 for a '
+                        'metal, 0 for a dielectric) instead of fitting it, '
+                        'when the material class is known')
+    parser.add_argument('--tv-weight', type=nonnegative_float,
+                        default=tv_weight, metavar='W',
+                        help=f'total-variation weight over the surface '
+                        f'graph, smoothing the maps (default: '
+                        f'{tv_weight:g})')
+    parser.add_argument('--device', default='cpu',
+                        help='cpu, cuda, cuda:N or auto (cuda when there is '
+                        'one) (default: cpu)')
+    parser.add_argument('--dtype', choices=('float64', 'float32'),
+                        default='float64', help='precision of the '
+                        'computation; float32 halves the memory '
+                        '(default: float64)')
+    example = parser.add_argument_group(
+        'synthetic example', 'write a scene folder instead of reading one')
+    example.add_argument('--write-example', default=None, metavar='DIR',
+                         help='write a synthetic scene (svbrdf_scene: '
+                         'metals under a sun and sky) with '
+                         'ground_truth.npz into DIR and stop')
+    example.add_argument('--example-views', type=positive_int, default=None,
+                         metavar='N', help=f'cameras of the example '
+                         f'(default: {EXAMPLE_VIEWS})')
+    example.add_argument('--example-image-size', type=positive_int,
+                         default=None, metavar='PIXELS',
+                         help=f'side of its square photographs (default: '
+                         f'{EXAMPLE_IMAGE_SIZE})')
+    example.add_argument('--example-subdivisions', type=nonnegative_int,
+                         default=None, metavar='S', help=f'icosphere '
+                         f'subdivisions, 10 * 4^S + 2 vertices (default: '
+                         f'{EXAMPLE_SUBDIVISIONS}: 642)')
+    example.add_argument('--seed', type=nonnegative_int, default=0,
+                         help='of the example\'s materials and sun '
+                         '(default: 0)')
+
+
+@contextmanager
+def _stage(name: str, quiet: bool, seconds: dict, key: str):
+    """Times a stage and shows it on stderr (progress, not the result)."""
+    if not quiet:
+        print(f"{name} ...", file=sys.stderr, flush=True)
+    start = time.perf_counter()
+    yield
+    seconds[key] = round(time.perf_counter() - start, 3)
+
+
+def _device(text: str):
+    import torch
+    if text == 'auto':
+        return torch.device('cuda' if torch.cuda.is_available() else 'cpu')
+    try:
+        device = torch.device(text)
+    except (RuntimeError, ValueError):
+        raise UsageError(f"--device {text!r} is not a device; use cpu, "
+                         f"cuda, cuda:N or auto") from None
+    if device.type == 'cuda' and not torch.cuda.is_available():
+        raise UsageError(f"--device {text}: no CUDA device is available "
+                         f"here; use --device cpu")
+    if device.type not in ('cpu', 'cuda'):
+        raise UsageError(f"--device {text!r}: use cpu, cuda, cuda:N or auto")
+    return device
 
 
 def run(args):
-    raise NotImplementedError
+    example_options = (args.example_views, args.example_image_size,
+                       args.example_subdivisions)
+    if args.write_example is not None:
+        if args.scene is not None:
+            raise UsageError("give either SCENE_DIR (to recover maps) or "
+                             "--write-example DIR (to write a scene), not "
+                             "both")
+        return write_example(args)
+    if any(option is not None for option in example_options):
+        raise UsageError("--example-views, --example-image-size and "
+                         "--example-subdivisions only go with "
+                         "--write-example DIR")
+    if args.scene is None:
+        raise UsageError("give a SCENE_DIR (see 'tg-intrinsic svbrdf --help' "
+                         "for its format) or --write-example DIR")
+    return recover(args)
+
+
+# ------------------------------------------------------------------ example
+def write_example(args) -> int:
+    """Writes the synthetic scene folder of ``--write-example``."""
+    import numpy as np
+    from tg_intrinsic.datasets import svbrdf_scene
+    from tg_intrinsic.io import scene_summary, write_scene
+    from tg_intrinsic.io.scene import FORMAT, GROUND_TRUTH_FILE
+    from tg_intrinsic.utils import atomic_write
+
+    folder = output_folder(args.write_example)
+    views = args.example_views or EXAMPLE_VIEWS
+    size = args.example_image_size or EXAMPLE_IMAGE_SIZE
+    subdivisions = EXAMPLE_SUBDIVISIONS if args.example_subdivisions is None \
+        else args.example_subdivisions
+    if not args.quiet:
+        print(f"rendering a synthetic scene ({views} views of {size} x "
+              f"{size}) ...", file=sys.stderr, flush=True)
+    data = svbrdf_scene('sphere', num_views=views, image_size=(size, size),
+                        materials='metals', seed=args.seed,
+                        resolution=subdivisions)
+    write_scene(folder, data)
+    truth = {name: getattr(data, name).detach().cpu().numpy()
+             for name in ('base_color', 'metallic', 'roughness', 'pos')}
+    atomic_write(os.path.join(folder, GROUND_TRUTH_FILE),
+                 lambda f: np.savez(f, **truth), 'wb')
+    readme = ('A synthetic scene written by "tg-intrinsic svbrdf '
+              '--write-example" (tg_intrinsic.datasets.svbrdf_scene: '
+              f'metals under a sun and sky, seed {args.seed}).\n'
+              f'Recover its maps with: tg-intrinsic svbrdf {folder} --out '
+              f'OUT\n\n{FORMAT}\n')
+    atomic_write(os.path.join(folder, 'README.txt'),
+                 lambda f: f.write(readme), 'w')
+    if not args.quiet:
+        print(f"wrote {folder}: {scene_summary(data)}, with "
+              f"{GROUND_TRUTH_FILE}\nnext: tg-intrinsic svbrdf {folder} "
+              f"--out OUT")
+    return 0
+
+
+# ------------------------------------------------------------------ recovery
+def recover(args) -> int:
+    """Reads the scene, recovers the maps and writes the outputs."""
+    import numpy as np
+    import torch
+
+    import tg_intrinsic
+    from tg_intrinsic.io import read_scene, scene_summary
+    from tg_intrinsic.io.scene import GROUND_TRUTH_FILE
+    from tg_intrinsic.nn import FrequencySVBRDF
+    from tg_intrinsic.transforms import (FitSphericalHarmonics,
+                                         ProjectViews, SpectralUncertainty)
+    from tg_intrinsic.utils import atomic_write_json
+
+    device = _device(args.device)
+    dtype = getattr(torch, args.dtype)
+    l_max = args.l_max if args.l_max is not None else (
+        SPLIT_SUM_L_MAX if args.specular_model == 'split_sum'
+        else _default(FitSphericalHarmonics.__init__, 'l_max'))
+    scene = args.scene
+    truth_path = os.path.join(scene, GROUND_TRUTH_FILE)
+    seconds = {}
+    start = time.perf_counter()
+    # read without a progress line: a bad scene is reported on one line
+    data = read_scene(scene, dtype=dtype)
+    truth = _read_ground_truth(truth_path, data.pos) \
+        if os.path.isfile(truth_path) else None
+    seconds['read'] = round(time.perf_counter() - start, 3)
+    out = output_folder(args.out or os.path.join(
+        'runs', 'svbrdf_' + os.path.basename(os.path.normpath(
+            os.path.abspath(scene)))))
+    if not args.quiet:
+        print(f"read {scene}: {scene_summary(data)}", file=sys.stderr,
+              flush=True)
+    data = data.to(device)
+    with _stage('projecting the points into the views', args.quiet,
+                seconds, 'project'):
+        data = ProjectViews()(data)
+    with _stage(f'fitting spherical harmonics (l_max = {l_max})',
+                args.quiet, seconds, 'fit_spherical_harmonics'):
+        data = FitSphericalHarmonics(l_max=l_max)(data)
+    with _stage('spectral uncertainty', args.quiet, seconds,
+                'spectral_uncertainty'):
+        data = SpectralUncertainty(store_likelihood=False)(data)
+    model = FrequencySVBRDF(data.num_nodes,
+                            specular_model=args.specular_model).to(device)
+    with _stage(f'fitting ({args.steps} steps)', args.quiet, seconds,
+                'fit'):
+        result = model.fit(data, steps=args.steps, tv_weight=args.tv_weight,
+                           metallic=args.metallic, progress=not args.quiet)
+    with _stage('writing', args.quiet, seconds, 'write'):
+        maps = {name: value for name, value in result.maps().items()}
+        files = _write_outputs(out, data, result, maps,
+                               os.path.basename(os.path.normpath(
+                                   os.path.abspath(scene))))
+    seconds['total'] = round(time.perf_counter() - start, 3)
+
+    seen = data.obs_mask.sum(1).cpu().double()
+    face = getattr(data, 'face', None)
+    report = {
+        'scene': os.path.abspath(scene),
+        'points': int(data.num_nodes),
+        'triangles': None if face is None else int(face.size(1)),
+        'views': int(data.images.size(0)),
+        'image_size': list(data.images.shape[1:3]),
+        'envmap_size': list(data.envmap.shape[:2]),
+        'observations_per_point': {
+            'min': int(seen.min()), 'median': float(seen.median()),
+            'mean': round(float(seen.mean()), 3), 'max': int(seen.max()),
+            'unseen_points': int((seen == 0).sum())},
+        'options': {'steps': args.steps, 'l_max': l_max,
+                    'specular_model': args.specular_model,
+                    'metallic': args.metallic, 'tv_weight': args.tv_weight,
+                    'device': str(device), 'dtype': args.dtype},
+        'seconds': seconds,
+        'initial_loss': result.loss[0],
+        'final_loss': result.loss[-1],
+        'mean_entropy': float(np.mean(maps['entropy'])),
+        'ground_truth': None if truth is None else _errors(maps, truth),
+        'files': sorted(os.path.basename(f) for f in files) + ['report.json'],
+        'tg_intrinsic': tg_intrinsic.__version__,
+    }
+    atomic_write_json(os.path.join(out, 'report.json'), report)
+    if not args.quiet:
+        _print_summary(out, report)
+    return 0
+
+
+def _read_ground_truth(path: str, pos) -> dict:
+    import numpy as np
+    num_points = pos.size(0)
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            truth = {k: f[k] for k in f.files}
+    except (OSError, ValueError) as error:
+        raise ValueError(f"could not read '{path}': {error}") from None
+    shapes = {'base_color': (num_points, 3), 'roughness': (num_points, ),
+              'metallic': (num_points, )}
+    for name, shape in shapes.items():
+        if name not in truth:
+            if name == 'metallic':
+                continue
+            raise ValueError(f"'{path}' has no '{name}'; it needs "
+                             f"base_color [N, 3] and roughness [N] "
+                             f"(metallic [N] optional)")
+        if truth[name].shape != shape:
+            raise ValueError(f"'{path}': '{name}' has shape "
+                             f"{list(truth[name].shape)} but the geometry "
+                             f"has {num_points} points, so it must be "
+                             f"{list(shape)}")
+        if not np.isfinite(truth[name]).all():
+            raise ValueError(f"'{path}': '{name}' holds NaN or infinite "
+                             f"values")
+    if 'pos' in truth:  # the same points in the same order
+        pos = pos.detach().cpu().double().numpy()
+        scale = float(np.abs(pos).max()) or 1.0
+        if truth['pos'].shape != pos.shape or not np.allclose(
+                truth['pos'], pos, rtol=0, atol=1e-5 * scale):
+            raise ValueError(f"'{path}': its 'pos' are not the points of the"
+                             f" geometry file (another mesh, or reordered "
+                             f"vertices), so its maps cannot be compared")
+    return truth
+
+
+def _errors(maps: dict, truth: dict) -> dict:
+    """Errors of the recovered maps against the ground truth, and how well
+    the entropy ranks the points by their roughness error."""
+    import numpy as np
+    from scipy.stats import spearmanr
+    error = np.abs(maps['roughness'] - truth['roughness'])
+    out = {
+        'roughness_mae': float(error.mean()),
+        'base_color_rmse': float(np.sqrt(np.mean(
+            (maps['base_color'] - truth['base_color']) ** 2))),
+    }
+    if 'metallic' in truth:
+        out['metallic_mae'] = float(np.abs(maps['metallic']
+                                           - truth['metallic']).mean())
+    rho = float('nan')
+    if np.ptp(maps['entropy']) > 0 and np.ptp(error) > 0:
+        rho = float(spearmanr(maps['entropy'], error).statistic)
+    out['entropy_roughness_error_spearman'] = None if np.isnan(rho) \
+        else rho
+    return out
+
+
+def _write_outputs(out: str, data, result, maps: dict, name: str) -> list:
+    """maps.npz, a PLY and a PNG per map; returns the written paths."""
+    import matplotlib
+    import numpy as np
+    from tg_intrinsic.io import write_ply
+    from tg_intrinsic.io.figures import draw_surface
+    from tg_intrinsic.nn.svbrdf_result import MAP_INFO
+
+    pos = data.pos.detach().cpu().double().numpy()
+    normal = data.normal.detach().cpu().double().numpy()
+    face = getattr(data, 'face', None)
+    face = None if face is None else face.detach().cpu().numpy()
+    files = [result.save_npz(os.path.join(out, 'maps.npz'))]
+    normals = {k: normal[:, i] for i, k in enumerate(('nx', 'ny', 'nz'))}
+    points = f"{len(pos)} {'vertices' if face is not None else 'points'}"
+    for key in MAP_NAMES:
+        value = np.asarray(maps[key], dtype=np.float64)
+        info = MAP_INFO[key]
+        if value.ndim == 2:  # the base colour is its own colour
+            colors = _srgb(value)
+        else:
+            colormap = matplotlib.colormaps[info['cmap']]
+            colors = colormap(np.clip(value, 0, 1))[:, :3]
+        files.append(write_ply(os.path.join(out, f'{key}.ply'), pos,
+                               None if face is None else face.T,
+                               {key: value, **normals}, colors=colors))
+        title = f"{info['title']} recovered on {name} ({points})"
+        if value.ndim == 2:
+            files.append(draw_surface(
+                os.path.join(out, f'{key}.png'), pos, face,
+                colors=colors, normal=normal,
+                title=f"{title}\n{info['label']}, shown sRGB-encoded"))
+        else:
+            files.append(draw_surface(
+                os.path.join(out, f'{key}.png'), pos, face, values=value,
+                normal=normal, title=title, label=info['label'],
+                cmap=info['cmap'], vmin=0.0, vmax=1.0))
+    return files
+
+
+def _srgb(linear):
+    """Linear RGB in [0, 1] as sRGB-encoded display colours (IEC 61966-2-1),
+    so a base colour looks on screen as it would rendered."""
+    import numpy as np
+    linear = np.clip(linear, 0, 1)
+    return np.where(linear <= 0.0031308, 12.92 * linear,
+                    1.055 * linear ** (1 / 2.4) - 0.055)
+
+
+def _print_summary(out: str, report: dict):
+    seen = report['observations_per_point']
+    lines = [
+        f"{report['points']} points, {report['views']} views: "
+        f"{seen['mean']:.1f} observations per point on average"
+        + (f", {seen['unseen_points']} points unseen"
+           if seen['unseen_points'] else ''),
+        f"fit: {report['options']['steps']} steps in "
+        f"{report['seconds']['fit']:.1f} s, loss {report['initial_loss']:.4g}"
+        f" -> {report['final_loss']:.4g}; mean entropy "
+        f"{report['mean_entropy']:.3f}",
+    ]
+    truth = report['ground_truth']
+    if truth is not None:
+        rho = truth['entropy_roughness_error_spearman']
+        lines.append(
+            f"against the ground truth: roughness MAE "
+            f"{truth['roughness_mae']:.3f}, base colour RMSE "
+            f"{truth['base_color_rmse']:.3f}, Spearman(entropy, roughness "
+            f"error) {'n/a' if rho is None else f'{rho:+.2f}'}")
+    lines.append(f"wrote {out}: maps.npz, {', '.join(MAP_NAMES)} (.ply and "
+                 f".png), report.json ({report['seconds']['total']:.1f} s)")
+    print('\n'.join(lines))

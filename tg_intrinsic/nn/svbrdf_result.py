@@ -1,3 +1,4 @@
+import math
 import os
 from dataclasses import dataclass, field
 from typing import List, Optional, Tuple
@@ -7,6 +8,19 @@ import torch
 from torch import Tensor
 
 from tg_intrinsic.utils import atomic_write
+
+# What each map is, for figures and colour-mapped exports: a title, the
+# colour-bar label (with units) and the colormap of scalar maps.
+MAP_INFO = {
+    'base_color': {'title': 'base colour', 'label': 'linear RGB in [0, 1]',
+                   'cmap': None},
+    'metallic': {'title': 'metallic', 'label': 'metallic (0 dielectric, '
+                 '1 metal)', 'cmap': 'viridis'},
+    'roughness': {'title': 'roughness', 'label': 'perceptual roughness r '
+                  '(GGX alpha = r^2)', 'cmap': 'viridis'},
+    'entropy': {'title': 'uncertainty', 'label': 'normalised entropy (0 '
+                'certain, 1 unknown)', 'cmap': 'turbo'},
+}
 
 
 @dataclass
@@ -44,28 +58,62 @@ class SVBRDFResult:
                    for k, v in out.items()}
         return out
 
+    def save_npz(self, path: str) -> str:
+        """Writes :meth:`maps` as ``.npz`` atomically; returns ``path``."""
+        maps = self.maps()
+        atomic_write(path, lambda f: np.savez(f, **maps), 'wb')
+        return path
+
     def save(self, directory: str, pos: Tensor = None,
              intrinsics: Tensor = None, extrinsics: Tensor = None,
-             image_size=(512, 512)) -> List[str]:
-        """Writes ``maps.npz`` and one PNG per map (entropy in the turbo
-        colormap) into :obj:`directory`, each file atomically. Texel maps
-        are written as textures; point maps are splatted into one view
-        (the given camera, else an orthographic view from above, along
-        :math:`-z`).
-        Returns the written paths."""
+             image_size=(512, 512), face: Tensor = None) -> List[str]:
+        r"""Writes ``maps.npz`` and one PNG per map into :obj:`directory`,
+        each file atomically: the base colour as RGB, metallic and
+        roughness as grey values (so texel maps are usable textures), the
+        entropy through the colormap of :data:`MAP_INFO` (turbo). Texel
+        maps are written as textures. Point maps are drawn as seen by one
+        camera (the first of :obj:`intrinsics` / :obj:`extrinsics`, else
+        one above the object looking down :math:`-z`): on the surface
+        when :obj:`face` is given (rasterised,
+        :func:`~tg_intrinsic.geometry.render.rasterize`, values
+        interpolated by the barycentrics), else as splats as wide as the
+        point spacing (:func:`~tg_intrinsic.io.figures.splat_index`); the
+        background is black.
+
+        Args:
+            directory (str): Created if missing.
+            pos (torch.Tensor, optional): Points :math:`(N, 3)` (needed for
+                point maps).
+            intrinsics (torch.Tensor, optional): :math:`(V, 3, 3)` or
+                :math:`(3, 3)`.
+            extrinsics (torch.Tensor, optional): :math:`(V, 3, 4)` or
+                :math:`(3, 4)`, world to camera (OpenCV).
+            image_size (tuple, optional): ``(height, width)`` of point-map
+                images. (default: :obj:`(512, 512)`)
+            face (torch.Tensor, optional): Triangles :math:`(3, F)` of a
+                mesh whose vertices are the points. (default: :obj:`None`)
+
+        Returns:
+            The written paths, ``maps.npz`` first.
+        """
         import matplotlib
         maps = self.maps()
-        paths = [os.path.join(directory, 'maps.npz')]
-        atomic_write(paths[0], lambda f: np.savez(f, **maps), 'wb')
-        turbo = matplotlib.colormaps['turbo']
+        os.makedirs(directory, exist_ok=True)
+        paths = [self.save_npz(os.path.join(directory, 'maps.npz'))]
         if self.texture_shape is None:
-            index = _splat_index(pos, intrinsics, extrinsics, image_size)
+            pixels, weight = _point_map_pixels(pos, face, intrinsics,
+                                               extrinsics, image_size)
         for name, value in maps.items():
             if self.texture_shape is None:
-                value = np.where((index >= 0).reshape(index.shape + (1, ) * (
-                    value.ndim - 1)), value[index.clip(0)], np.nan)
+                hit = (pixels >= 0).all(-1)
+                value = (weight[..., None] * value[pixels.clip(0)].reshape(
+                    pixels.shape + (-1, ))).sum(-2)
+                value[~hit] = np.nan
+                if maps[name].ndim == 1:
+                    value = value[..., 0]
             if name == 'entropy':
-                image = turbo(np.nan_to_num(value, nan=0.0))[..., :3]
+                colormap = matplotlib.colormaps[MAP_INFO[name]['cmap']]
+                image = colormap(np.nan_to_num(value, nan=0.0))[..., :3]
                 image[np.isnan(value)] = 0
             elif value.ndim == 2:
                 image = np.repeat(np.nan_to_num(value)[..., None], 3, -1)
@@ -83,54 +131,40 @@ def _write_png(f, image):
     plt.imsave(f, image, format='png')
 
 
-def _splat_index(pos, intrinsics, extrinsics, image_size) -> np.ndarray:
-    """The point seen in each pixel (-1 for background), points drawn as
-    squares from back to front."""
-    from tg_intrinsic.geometry.cameras import project, splat_depth
+def _point_map_pixels(pos, face, intrinsics, extrinsics, image_size):
+    """What each pixel of one camera shows: ``(index (H, W, k), weight
+    (H, W, k))``, the points whose values are blended (k = 3 triangle
+    corners weighted by barycentrics, or k = 1 splatted point), index -1
+    on the background."""
+    from tg_intrinsic.geometry.cameras import look_at_cameras
+    from tg_intrinsic.geometry.render import rasterize
+    from tg_intrinsic.io.figures import splat_index
     if pos is None:
         raise ValueError("saving point maps as images needs 'pos' (and "
-                         "optionally one camera); texel maps need "
-                         "texture_shape")
+                         "optionally one camera and the faces); texel maps "
+                         "need texture_shape")
     pos = pos.detach().cpu().double()
     height, width = image_size
     if intrinsics is None or extrinsics is None:
+        # above the object, looking down -z, the bounding sphere in view
         centre = (pos.max(0).values + pos.min(0).values) / 2
-        extent = float((pos - centre).abs().max()) * 1.05
-        uv = torch.stack([(pos[:, 0] - centre[0]) / extent,
-                          -(pos[:, 1] - centre[1]) / extent], -1)
-        uv = (uv + 1) / 2 * torch.tensor([width, height], dtype=uv.dtype)
-        # looking down -z from above: the highest points are nearest
-        uv, depth = uv[None], (centre[2] + 2 * extent - pos[:, 2])[None]
-    else:
-        uv, depth = project(pos, intrinsics[:1].cpu().double(),
-                            extrinsics[:1].cpu().double())
-    inside = (depth > 0) & (uv[..., 0] >= 0) & (uv[..., 0] < width) \
-        & (uv[..., 1] >= 0) & (uv[..., 1] < height)
-    # splats as wide as the points' median spacing on the surface, so the
-    # surface reads as a surface and hides what lies behind it
-    from tg_intrinsic.geometry import knn
-    edge = knn(pos, 1) if pos.size(0) > 1 else None
-    spacing = float((pos[edge[0]] - pos[edge[1]]).norm(dim=-1).median()) \
-        if edge is not None else 0.0
-    if intrinsics is None or extrinsics is None:
-        pixels = spacing * width / (2 * extent)
-    else:
-        pixels = spacing * float(intrinsics[0, 0, 0]) / float(
-            depth[inside].median()) if bool(inside.any()) else 1.0
-    reach = int(min(max(round(pixels), 1), 24))
-    radius = torch.full_like(depth, reach, dtype=torch.long)
-    buffer = splat_depth(uv, depth, inside, radius, height, width)[0]
-    # paint back to front so the nearest point wins each pixel
-    order = torch.argsort(depth[0], descending=True)
-    order = order[inside[0, order]]
-    image = np.full((height, width), -1, dtype=np.int64)
-    col = uv[0, order, 0].floor().long()
-    row = uv[0, order, 1].floor().long()
-    for dy in range(-reach, reach + 1):
-        for dx in range(-reach, reach + 1):
-            r, c = (row + dy).clamp(0, height - 1), (col + dx).clamp(
-                0, width - 1)
-            front = depth[0, order] <= buffer[r, c] + 1e-9 + 0.02 * float(
-                depth[0].abs().max())
-            image[r[front].numpy(), c[front].numpy()] = order[front].numpy()
-    return image
+        radius = float((pos - centre).norm(dim=1).max()) or 1.0
+        fov = 2 * math.degrees(math.asin(1 / 4.0)) * 1.05
+        intrinsics, extrinsics = look_at_cameras(
+            (centre + torch.tensor([0.0, 0.0, 4 * radius],
+                                   dtype=pos.dtype))[None],
+            target=centre.tolist(), fov_degrees=fov,
+            image_size=(height, width))
+    K = intrinsics.detach().cpu().double().reshape(-1, 3, 3)[0]
+    E = extrinsics.detach().cpu().double().reshape(-1, 3, 4)[0]
+    if face is None:
+        index = splat_index(pos, K, E, (height, width))[..., None]
+        return index, np.ones(index.shape)
+    face = torch.as_tensor(face).detach().cpu().long()
+    if face.dim() == 2 and face.size(0) != 3 and face.size(1) == 3:
+        face = face.t()  # trimesh layout (F, 3)
+    face_id, bary, _ = rasterize(pos, face.contiguous(), K, E, height, width)
+    face_id, bary = face_id.numpy(), bary.numpy()
+    corners = face.t().numpy()[face_id.clip(0)]  # (H, W, 3)
+    corners[face_id < 0] = -1
+    return corners, np.where(face_id[..., None] >= 0, bary, 0.0)

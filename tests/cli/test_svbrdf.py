@@ -1,0 +1,161 @@
+"""``tg-intrinsic svbrdf``: the example scene, the recovery and its
+outputs, and one-line errors with exit code 2 on bad input. The scene is
+tiny (162 points, 8 views of 32 x 32) and the fits are a few steps: these
+check the plumbing, not the accuracy (tests/test_svbrdf_end_to_end.py)."""
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from tg_intrinsic.cli import main
+from tg_intrinsic.io import read_scene, read_surface
+
+TINY = ['--example-views', '8', '--example-image-size', '32',
+        '--example-subdivisions', '2']
+MAPS = ('base_color', 'metallic', 'roughness', 'entropy')
+
+
+def run(argv):
+    """The exit code of ``main``, also for argparse's own errors (which
+    exit through SystemExit)."""
+    try:
+        return main(argv)
+    except SystemExit as exit:
+        return exit.code
+
+
+@pytest.fixture(scope='module')
+def scene(tmp_path_factory):
+    folder = tmp_path_factory.mktemp('svbrdf') / 'scene'
+    assert run(['svbrdf', '--write-example', str(folder), '--quiet']
+               + TINY) == 0
+    return folder
+
+
+def one_line_error(capsys, *words):
+    err = capsys.readouterr().err.strip()
+    assert err.startswith('tg-intrinsic svbrdf: error: '), err
+    assert '\n' not in err and 'Traceback' not in err, err
+    for word in words:
+        assert word in err, err
+    return err
+
+
+def test_example_is_a_scene_folder(scene):
+    names = sorted(os.listdir(scene))
+    assert {'cameras.json', 'geometry.ply', 'ground_truth.npz', 'images',
+            'README.txt'} <= set(names)
+    assert any(n.startswith('envmap.') for n in names)
+    assert len(os.listdir(scene / 'images')) == 8
+    data = read_scene(scene)
+    assert data.pos.shape == (162, 3) and data.images.shape == (8, 32, 32, 3)
+    truth = np.load(scene / 'ground_truth.npz')
+    assert truth['roughness'].shape == (162, )
+    assert np.allclose(truth['pos'], data.pos.numpy())
+    assert 'cameras.json' in (scene / 'README.txt').read_text()
+
+
+def test_recovery_writes_maps_plys_figures_and_report(scene, tmp_path,
+                                                      capsys):
+    out = tmp_path / 'out'
+    assert run(['svbrdf', str(scene), '--out', str(out), '--steps', '3',
+                '--quiet']) == 0
+    assert capsys.readouterr().out == ''  # --quiet: no summary
+    names = set(os.listdir(out))
+    assert names == {'maps.npz', 'report.json'} | {
+        f'{m}.{e}' for m in MAPS for e in ('ply', 'png')}
+    maps = np.load(out / 'maps.npz')
+    assert maps['base_color'].shape == (162, 3)
+    for name in MAPS[1:]:
+        assert maps[name].shape == (162, )
+    pos, face, properties = read_surface(out / 'roughness.ply')
+    assert pos.shape == (162, 3) and face.shape == (320, 3)
+    assert np.allclose(properties['roughness'], maps['roughness'])
+    assert {'red', 'green', 'blue', 'nx', 'ny', 'nz'} <= set(properties)
+    _, _, properties = read_surface(out / 'base_color.ply')
+    assert np.allclose(np.stack([properties[f'base_color_{k}']
+                                 for k in range(3)], 1), maps['base_color'])
+    import matplotlib.pyplot as plt
+    image = plt.imread(out / 'entropy.png')
+    assert image.shape[0] > 200 and image.shape[1] > 400
+    report = json.loads((out / 'report.json').read_text())
+    assert report['points'] == 162 and report['views'] == 8
+    assert report['triangles'] == 320
+    seen = report['observations_per_point']
+    assert 0 <= seen['min'] <= seen['mean'] <= seen['max'] <= 8
+    assert set(report['seconds']) >= {'read', 'project', 'fit', 'write',
+                                      'total'}
+    assert report['options']['steps'] == 3
+    assert report['options']['l_max'] == 5
+    assert np.isfinite(report['final_loss'])
+    assert 0 <= report['mean_entropy'] <= 1
+    truth = report['ground_truth']
+    for key in ('roughness_mae', 'base_color_rmse', 'metallic_mae'):
+        assert 0 <= truth[key] < 1, key
+    rho = truth['entropy_roughness_error_spearman']
+    assert rho is None or -1 <= rho <= 1
+    assert not [n for n in os.listdir(out) if n.startswith('.')]
+
+
+def test_subprocess_with_options(scene, tmp_path):
+    out = tmp_path / 'out'
+    result = subprocess.run(
+        [sys.executable, '-m', 'tg_intrinsic', 'svbrdf', str(scene),
+         '--out', str(out), '--steps', '2', '--specular-model',
+         'split_sum', '--metallic', '1', '--tv-weight', '0.01'],
+        capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert 'roughness MAE' in result.stdout
+    assert f'wrote {out}' in result.stdout
+    report = json.loads((out / 'report.json').read_text())
+    assert report['options']['l_max'] == 8  # split_sum's default
+    assert report['options']['metallic'] == 1.0
+    assert np.allclose(np.load(out / 'maps.npz')['metallic'], 1.0)
+
+
+def test_bad_input_is_one_line_with_exit_code_2(scene, tmp_path, capsys):
+    assert run(['svbrdf', str(tmp_path / 'nowhere'), '--out',
+                str(tmp_path / 'o')]) == 2
+    one_line_error(capsys, 'nowhere', 'does not exist')
+    (tmp_path / 'empty').mkdir()
+    assert run(['svbrdf', str(tmp_path / 'empty'), '--out',
+                str(tmp_path / 'o')]) == 2
+    one_line_error(capsys, 'has no cameras.json')
+    # one camera fewer than photographs
+    copy = tmp_path / 'copy'
+    shutil.copytree(scene, copy)
+    spec = json.loads((copy / 'cameras.json').read_text())
+    spec['cameras'] = spec['cameras'][:-1]
+    (copy / 'cameras.json').write_text(json.dumps(spec))
+    assert run(['svbrdf', str(copy), '--out', str(tmp_path / 'o')]) == 2
+    one_line_error(capsys, 'lists 7 camera(s)', 'holds 8 image(s)',
+                   'has no camera')
+    last = sorted(os.listdir(copy / 'images'))[-1]
+    os.remove(copy / 'images' / last)  # the counts agree again
+    np.savez(copy / 'ground_truth.npz', roughness=np.zeros(5),
+             base_color=np.zeros((5, 3)))
+    assert run(['svbrdf', str(copy), '--out', str(tmp_path / 'o')]) == 2
+    one_line_error(capsys, 'ground_truth.npz',
+                   "'base_color' has shape [5, 3]", '162 points')
+    assert run(['svbrdf', str(scene), '--steps', '-3']) == 2
+    one_line_error(capsys, '--steps', 'must be at least 0')
+    assert run(['svbrdf', str(scene), '--metallic', '2']) == 2
+    one_line_error(capsys, '--metallic', 'must lie in [0, 1]')
+    assert run(['svbrdf']) == 2
+    one_line_error(capsys, 'give a SCENE_DIR')
+    assert run(['svbrdf', str(scene), '--write-example', str(tmp_path)]) \
+        == 2
+    one_line_error(capsys, 'not both')
+    assert run(['svbrdf', str(scene), '--example-views', '3']) == 2
+    one_line_error(capsys, 'only go with --write-example')
+    if not torch.cuda.is_available():
+        assert run(['svbrdf', str(scene), '--device', 'cuda']) == 2
+        one_line_error(capsys, 'no CUDA device')
+    assert run(['svbrdf', str(scene), '--device', 'tpu9']) == 2
+    one_line_error(capsys, '--device')
+    assert not (tmp_path / 'o').exists()  # nothing written on bad input

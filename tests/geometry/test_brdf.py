@@ -263,3 +263,27 @@ def test_split_sum_reflects_uniform_light_exactly():
     want = kd.unsqueeze(1) * l0 + l0 * ggx_albedo(mirror[..., 2], roughness,
                                                   r0)
     assert torch.allclose(out, want, atol=1e-10)
+
+
+@pytest.mark.parametrize('dtype', [torch.float32, torch.float64])
+def test_a_channel_without_light_is_uninformative_not_an_overflow(dtype):
+    # Seen in float32 captures: one colour channel of the light is black
+    # while the observations hold a little noise in it; dividing by its
+    # power overflowed and left the K_s index unset.
+    g = torch.Generator().manual_seed(9)
+    light = dirac_light(unit(torch.randn(50, 3, generator=g,
+                                         dtype=torch.float64)))
+    outgoing = 0.8 * lobe_filter(L_MAX, torch.full(
+        (50, ), 0.16, dtype=torch.float64)).unsqueeze(-1) * light
+    light[..., 2] = 0
+    outgoing[..., 2] += 1e-3 * torch.randn(50, outgoing.size(1),
+                                           generator=g, dtype=torch.float64)
+    entropy, likelihood, r_hat, ks_hat = spectral_uncertainty(
+        *[s.to(dtype) for s in observed_spectra(light, outgoing)])
+    for value in (entropy, likelihood, r_hat, ks_hat):
+        assert value.dtype == dtype and bool(torch.isfinite(value).all())
+    assert bool((ks_hat >= 0).all() and (ks_hat <= 1).all())
+    # the lit channels still decide: the same answer as without channel 2
+    lit = spectral_uncertainty(*[s[..., :2].to(dtype) for s in
+                                 observed_spectra(light, outgoing)])
+    assert torch.allclose(entropy, lit[0]) and torch.equal(r_hat, lit[2])

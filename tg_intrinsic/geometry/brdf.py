@@ -252,7 +252,8 @@ def spectral_uncertainty(spectrum_in: Tensor, spectrum_out: Tensor,
     one); its grid argmax gives :math:`\alpha`, and every channel's
     :math:`K_s` is its argmin of :math:`D` at that :math:`\alpha`. A point
     whose light is black in every channel, or that was never observed
-    (zero spectra), has a flat likelihood: entropy 1.
+    (zero spectra), has a flat likelihood: entropy 1; so does a channel
+    without light. The grid is evaluated in float64 whatever the input.
 
     Args:
         spectrum_in (torch.Tensor): :math:`S_L(l)` :math:`(N, l^*+1, C)`.
@@ -283,23 +284,28 @@ def spectral_uncertainty(spectrum_in: Tensor, spectrum_out: Tensor,
     scale = 1 / (2 * sigma * sigma)
     out = ([], [], [], [])
     for start in range(0, spectrum_in.size(0), chunk_size):
-        s_in = spectrum_in[start:start + chunk_size]
-        s_out = spectrum_out[start:start + chunk_size]
-        power = s_in.sum(1, keepdim=True).clamp_min(1e-30)
-        s_in = (s_in[:, 1:] / power).transpose(1, 2)  # (n, C, L)
-        s_out = (s_out[:, 1:] / power).transpose(1, 2)
+        # float64 here: dividing by a tiny light power overflows float32
+        s_in = spectrum_in[start:start + chunk_size].double()
+        s_out = spectrum_out[start:start + chunk_size].double()
+        power = s_in.sum(1, keepdim=True)
+        # a channel without light carries no information: flat likelihood
+        lit = power > 1e-30
+        power = torch.where(lit, power, torch.ones_like(power))
+        s_in = (lit * s_in[:, 1:] / power).transpose(1, 2)  # (n, C, L)
+        s_out = (lit * s_out[:, 1:] / power).transpose(1, 2)
         # D = sum B^2 - 2 ks^2 sum B f L + ks^4 sum f^2 L^2, expanded so
         # the grid costs two small matrix products.
-        cross = (s_out * s_in) @ lobe.t()  # (n, C, num_r)
-        square = (s_in * s_in) @ (lobe * lobe).t()
+        cross = (s_out * s_in) @ lobe.double().t()  # (n, C, num_r)
+        square = (s_in * s_in) @ (lobe * lobe).double().t()
         const = (s_out * s_out).sum(-1)  # (n, C)
         if cross.device.type == 'cpu':
-            result = _grid_cpu(cross, square, const, ks2, scale)
+            result = _grid_cpu(cross, square, const, ks2.double(), scale)
         else:
-            result = _grid_torch(cross, square, const, ks2, scale)
+            result = _grid_torch(cross, square, const, ks2.double(), scale)
         entropy, p_best, r_index, ks_index = result
-        out[0].append(entropy)
-        out[1].append(p_best)
+        dtype = spectrum_in.dtype
+        out[0].append(entropy.to(dtype))
+        out[1].append(p_best.to(dtype))
         out[2].append(roughness[r_index])
         out[3].append(ks[ks_index])
     return tuple(torch.cat(o) for o in out)
@@ -324,24 +330,20 @@ def _grid_torch(cross, square, const, ks2, scale):
 
 
 def _grid_cpu(cross, square, const, ks2, scale):
-    """The grid on the CPU: one compiled pass per point and channel, the
-    exponentials computed once, nothing of size points x channels x grid
-    allocated but the answer."""
+    """The grid on the CPU (float64): one compiled pass per point and
+    channel, the exponentials computed once, nothing of size points x
+    channels x grid allocated but the answer."""
     n, channels, num_r = cross.shape
     num_ks = ks2.numel()
     entropy = np.empty(n)
     p_best = np.empty((n, num_ks, num_r))
     r_index = np.empty(n, dtype=np.int64)
-    ks_index = np.empty((n, channels), dtype=np.int64)
-    # float64 inside whatever the input, so float32 input picks the same
-    # cells as float64 input would
-    _grid_kernel(*(t.double().contiguous().numpy() for t in (
+    ks_index = np.zeros((n, channels), dtype=np.int64)
+    _grid_kernel(*(t.contiguous().numpy() for t in (
         cross, square, const, ks2)), float(scale), entropy, p_best, r_index,
         ks_index)
-    dtype = cross.dtype
-    return (torch.from_numpy(entropy).to(dtype),
-            torch.from_numpy(p_best).to(dtype), torch.from_numpy(r_index),
-            torch.from_numpy(ks_index))
+    return (torch.from_numpy(entropy), torch.from_numpy(p_best),
+            torch.from_numpy(r_index), torch.from_numpy(ks_index))
 
 
 _NEGLIGIBLE = 50.0

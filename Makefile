@@ -20,16 +20,20 @@ $(STAMP): setup.py
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/python -m tg_intrinsic.demo
+	$(BIN)/tg-intrinsic demo
 
 train: $(STAMP)
-	$(BIN)/python -m tg_intrinsic.train $(ARGS)
+	$(BIN)/tg-intrinsic train $(ARGS)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q tests
 
+# Every benchmark script, then the README's results table from their JSON.
 benchmarks: $(STAMP)
-	for script in benchmarks/*.py; do $(BIN)/python $$script || exit 1; done
+	for script in benchmarks/*.py; do \
+		[ $$script = benchmarks/report.py ] || $(BIN)/python $$script || exit 1; \
+	done
+	$(BIN)/python benchmarks/report.py
 
 # The original Gravo MG (PyPI gravomg 0.0.4) needs numpy < 2: a separate
 # environment for the oracle test and benchmark (tests skip without it).

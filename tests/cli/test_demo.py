@@ -1,0 +1,60 @@
+"""`tg-intrinsic demo --quick`: all four methods run and every promised
+output exists (the quick numbers are a smoke test, not results)."""
+import json
+
+import pytest
+
+from tg_intrinsic.cli import main
+from tg_intrinsic.cli.demo import PARTS, nearest_centroid
+
+
+def test_quick_demo_writes_summary_and_figures(tmp_path, capsys):
+    out = tmp_path / 'demo'
+    code = main(['demo', '--quick', '--quiet', '--out', str(out), '--root',
+                 str(tmp_path / 'data')])
+    printed = capsys.readouterr().out
+    assert code == 0
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['parts'] == list(PARTS)
+    for part in PARTS:
+        assert summary[part]['figures'], part
+        for figure in summary[part]['figures']:
+            assert (out / figure).stat().st_size > 10_000, figure
+    for model in ('deltanet', 'hsn'):
+        assert 0 <= summary[model]['test_accuracy'] <= 1
+        assert (out / model / 'metrics.csv').exists()
+    assert 'shape_dna_nearest_centroid' in summary['hsn']['baselines']
+    gravo = summary['gravo']['problems']
+    for problem in ('smoothing', 'poisson'):
+        assert gravo[problem]['gravo']['converged']
+        # Gravo MG, scipy and pyamg solve the same system
+        assert gravo[problem]['gravo']['max_difference_to_direct'] < 1e-5
+        assert gravo[problem]['pyamg_sa_cg']['max_difference_to_direct'] \
+            < 1e-5
+    assert gravo['smoothing']['noise_rms_after'] < \
+        0.5 * gravo['smoothing']['noise_rms_before']
+    assert gravo['poisson']['gravo']['max_error_to_known_solution'] < 1e-5
+    svbrdf = summary['svbrdf']
+    assert 0 <= svbrdf['roughness_mae'] <= 1 and -1 <= svbrdf[
+        'spearman_entropy_vs_roughness_error'] <= 1
+    text = (out / 'summary.md').read_text()
+    for heading in ('DeltaNet', 'Harmonic Surface Network', 'Gravo MG',
+                    'SVBRDF'):
+        assert heading in text
+    assert str(out.resolve()) in printed  # says where the results are
+
+
+def test_demo_rejects_unknown_parts(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(['demo', '--only', 'everything'])
+    assert exit_info.value.code == 2
+    assert "invalid choice: 'everything'" in capsys.readouterr().err
+
+
+def test_nearest_centroid_baseline():
+    import numpy as np
+    train = np.array([[0.0, 0.0], [0.1, 0.0], [5.0, 5.0], [5.1, 5.0]])
+    labels = np.array([0, 0, 1, 1])
+    test = np.array([[0.2, 0.1], [4.9, 5.2]])
+    assert nearest_centroid(train, labels, test, np.array([0, 1])) == 1.0
+    assert nearest_centroid(train, labels, test, np.array([1, 0])) == 0.0

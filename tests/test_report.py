@@ -1,0 +1,146 @@
+"""benchmarks/report.py: the README's results table is what the benchmark
+JSONs say, and follows them."""
+import importlib.util
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCRIPT = os.path.join(ROOT, 'benchmarks', 'report.py')
+RESULTS = os.path.join(ROOT, 'benchmarks', 'results')
+README = os.path.join(ROOT, 'README.md')
+
+spec = importlib.util.spec_from_file_location('report', SCRIPT)
+report = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(report)
+
+
+@pytest.fixture
+def copies(tmp_path):
+    """The results JSONs and the README, copied."""
+    results = tmp_path / 'results'
+    results.mkdir()
+    for name in os.listdir(RESULTS):
+        if name.endswith('.json'):
+            shutil.copy(os.path.join(RESULTS, name), results / name)
+    readme = tmp_path / 'README.md'
+    shutil.copy(README, readme)
+    return results, readme
+
+
+def edit(path, change):
+    with open(path) as f:
+        data = json.load(f)
+    change(data)
+    with open(path, 'w') as f:
+        json.dump(data, f)
+
+
+def test_readme_matches_the_results():
+    run = subprocess.run([sys.executable, SCRIPT, '--check'],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, (
+        'README.md differs from benchmarks/results; run python '
+        'benchmarks/report.py\n' + run.stdout[-3000:] + run.stderr)
+
+
+def test_every_result_has_a_row():
+    names = sorted(os.path.splitext(n)[0] for n in os.listdir(RESULTS)
+                   if n.endswith('.json'))
+    assert sorted(report.ROWS) == names
+    table = report.build_table(RESULTS)
+    for name in names:
+        assert f'`{name}.py`' in table
+
+
+def test_a_changed_number_changes_the_table(copies, capsys):
+    results, readme = copies
+    before = report.build_table(str(results))
+
+    def faster_knn(data):
+        row = data['results'][0]
+        assert (row['op'], row['n']) == ('knn', 10000)
+        row['speedup'] = 42.0
+
+    edit(results / 'neighbors.json', faster_knn)
+    after = report.build_table(str(results))
+    assert before != after
+    assert 'knn 14-116x' in before and 'knn 42-116x' in after
+    changed = [line for line in after.split('\n')
+               if line not in before.split('\n')]
+    assert len(changed) == 1 and changed[0].startswith('| knn / radius')
+
+    # --check sees it and prints a diff; a rewrite fixes it, and leaves
+    # everything outside the markers as it was
+    args = ['--results', str(results), '--readme', str(readme)]
+    assert report.main(args + ['--check']) == 1
+    assert '+| knn / radius / fps' in capsys.readouterr().out
+    original = readme.read_text()
+    assert report.main(args) == 0
+    assert report.main(args + ['--check']) == 0
+    text = readme.read_text()
+    assert 'knn 42-116x' in text
+    assert text.split(report.START)[0] == original.split(report.START)[0]
+    assert text.split(report.END)[1] == original.split(report.END)[1]
+
+
+def test_a_number_deep_inside_a_benchmark_changes_its_row(copies):
+    results, _ = copies
+    before = report.build_table(str(results))
+
+    def nan_no_more(data):
+        for goal in data['goals']:
+            goal.pop('original_failed', None)
+
+    edit(results / 'gravo_mg.json', nan_no_more)
+    after = report.build_table(str(results))
+    assert 'the original fails' in before
+    assert 'the original fails' not in after
+
+
+def test_a_new_benchmark_without_a_row_is_an_error(copies, capsys):
+    results, readme = copies
+    (results / 'shiny_new.json').write_text('{"speedup": 3}')
+    with pytest.raises(report.ReportError, match='shiny_new.json'):
+        report.build_table(str(results))
+    assert report.main(['--check', '--results', str(results),
+                        '--readme', str(readme)]) == 2
+    assert 'shiny_new.json' in capsys.readouterr().err
+
+
+def test_a_row_without_results_is_an_error(copies):
+    results, _ = copies
+    os.remove(results / 'svbrdf_speed.json')
+    with pytest.raises(report.ReportError, match='svbrdf_speed.json'):
+        report.build_table(str(results))
+
+
+def test_a_json_missing_a_key_names_the_benchmark(copies):
+    results, _ = copies
+    edit(results / 'hsn_accuracy.json', lambda data: data.pop('epochs'))
+    with pytest.raises(report.ReportError, match='hsn_accuracy.json'):
+        report.build_table(str(results))
+
+
+def test_markers_are_required(tmp_path):
+    readme = tmp_path / 'README.md'
+    readme.write_text('# no table here\n')
+    with pytest.raises(report.ReportError, match='results:start'):
+        report.with_table(readme.read_text(), '| a |')
+    assert report.main(['--check', '--readme', str(readme)]) == 2
+
+
+def test_formatting_helpers():
+    assert report.times(9.96) == '10x' and report.times(6.26) == '6.3x'
+    assert report.span_times([13.97, 115.5]) == '14-116x'
+    assert report.sci(0.004721) == '5e-3'
+    assert report.sig(4648.456) == '4650' and report.seconds(8.57) == '8.6'
+    assert report.thousands(2500) == '2.5k' and \
+        report.thousands(49999) == '50k' and \
+        report.thousands(2028099) == '2.0M'
+    assert report.span_pct([0.8613, 1.0]) == '86-100%'
+    assert report.test_set_size([0.95, 0.925, 1 / 12, 109 / 120]) == 120

@@ -134,9 +134,9 @@ def main():
     # -- the solver on its own: any SPD matrix, tolerance 1e-4 -----------
     A = (S + 1e-6 * M).tocsr()           # nearly singular, as in the paper
     b = m * rhs.numpy()
-    x = solver.solve(A, b, tol=1e-4)     # setup (Galerkin levels) + cycles
+    solver.solve(A, b, tol=1e-4)         # setup (Galerkin levels) + cycles
     first = solver.info
-    x = solver.solve(A, b, tol=1e-4)     # same matrix: setup is cached
+    solver.solve(A, b, tol=1e-4)         # same matrix: setup is cached
     cached = solver.info
     print(f"GravoMG.solve on S + 1e-6 M to 1e-4: {first.iterations} V-cycles"
           f", residuals {', '.join(f'{r:.0e}' for r in first.residuals)}; "

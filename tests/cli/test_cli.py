@@ -9,28 +9,13 @@ import pytest
 
 from tg_intrinsic.cli import COMMANDS, main
 
-
-def run_cli(capsys, *argv):
-    code = main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def assert_user_error(code, err, *needles):
-    assert code == 2
-    assert 'Traceback' not in err
-    lines = [line for line in err.strip().split('\n') if line]
-    assert len(lines) == 1, err
-    for needle in needles:
-        assert needle in lines[0], lines[0]
+from tests.cli import assert_user_error, run_cli
 
 
 @pytest.mark.parametrize('command', COMMANDS)
 def test_every_command_has_help_with_a_worked_example(capsys, command):
-    with pytest.raises(SystemExit) as exit_info:
-        main([command, '--help'])
-    assert exit_info.value.code == 0
-    text = capsys.readouterr().out
+    code, text, _ = run_cli(capsys, command, '--help')
+    assert code == 0
     assert 'example' in text and f'tg-intrinsic {command}' in text
 
 
@@ -67,11 +52,8 @@ def test_info(capsys):
     (['train', 'deltanet', '--epochs', 'many'], ['--epochs', 'many']),
 ])
 def test_train_user_mistakes_end_in_one_line(capsys, argv, needles):
-    try:
-        code = main(argv)
-    except SystemExit as exit_info:  # argparse's own errors
-        code = exit_info.code
-    assert_user_error(code, capsys.readouterr().err, *needles)
+    code, _, err = run_cli(capsys, *argv)
+    assert_user_error(code, err, 'train', *needles)
 
 
 def test_train_writes_metrics_csv_and_curves(tmp_path, capsys):

@@ -2,10 +2,10 @@
 output exists (the quick numbers are a smoke test, not results)."""
 import json
 
-import pytest
-
 from tg_intrinsic.cli import main
 from tg_intrinsic.cli.demo import PARTS, nearest_centroid
+
+from tests.cli import assert_user_error, run_cli
 
 
 def test_quick_demo_writes_summary_and_figures(tmp_path, capsys):
@@ -45,10 +45,8 @@ def test_quick_demo_writes_summary_and_figures(tmp_path, capsys):
 
 
 def test_demo_rejects_unknown_parts(tmp_path, capsys):
-    with pytest.raises(SystemExit) as exit_info:
-        main(['demo', '--only', 'everything'])
-    assert exit_info.value.code == 2
-    assert "invalid choice: 'everything'" in capsys.readouterr().err
+    code, _, err = run_cli(capsys, 'demo', '--only', 'everything')
+    assert_user_error(code, err, 'demo', "invalid choice: 'everything'")
 
 
 def test_nearest_centroid_baseline():

@@ -11,12 +11,13 @@ import pytest
 import torch
 import trimesh
 
-from tg_intrinsic.cli import main
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.io import read_surface, write_ply
 from tg_intrinsic.train import hsn_pipeline
 from tg_intrinsic.transforms import (EstimateNormals, GravoHierarchy, LogMap,
                                      MLSOperators)
+
+from tests.cli import run_cli
 
 BAD = {'garbage.off': 'this is not a mesh\n',
        'nan.off': 'OFF\n3 1 0\n0 0 0\nnan 0 0\n0 1 0\n3 0 1 2\n',
@@ -25,12 +26,7 @@ BAD = {'garbage.off': 'this is not a mesh\n',
 
 def cli(argv, capsys):
     """Runs the command line: (exit code, stdout, stderr)."""
-    try:
-        code = main(argv)
-    except SystemExit as error:  # argparse rejects a value
-        code = error.code
-    out, err = capsys.readouterr()
-    return code, out, err
+    return run_cli(capsys, *argv)
 
 
 def load(path):

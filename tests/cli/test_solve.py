@@ -14,9 +14,10 @@ import trimesh
 from scipy.sparse.linalg import spsolve
 from torch_geometric.data import Data
 
-from tg_intrinsic.cli import main
 from tg_intrinsic.io import read_surface, write_ply
 from tg_intrinsic.solvers import poisson, smooth, stiffness_and_mass
+
+from tests.cli import run_cli
 
 # 162 vertices: ratio 4 and lower bound 10 give levels 162 -> 42 -> 10
 HIERARCHY = ['--ratio', '4', '--lower-bound', '10']
@@ -24,12 +25,7 @@ HIERARCHY = ['--ratio', '4', '--lower-bound', '10']
 
 def cli(argv, capsys):
     """Runs the command line: (exit code, stdout, stderr)."""
-    try:
-        code = main(argv)
-    except SystemExit as error:  # argparse rejects a value
-        code = error.code
-    out, err = capsys.readouterr()
-    return code, out, err
+    return run_cli(capsys, *argv)
 
 
 @pytest.fixture(scope='module')

@@ -21,12 +21,8 @@ MAPS = ('base_color', 'metallic', 'roughness', 'entropy')
 
 
 def run(argv):
-    """The exit code of ``main``, also for argparse's own errors (which
-    exit through SystemExit)."""
-    try:
-        return main(argv)
-    except SystemExit as exit:
-        return exit.code
+    """The exit code of ``main``."""
+    return main(argv)
 
 
 @pytest.fixture(scope='module')

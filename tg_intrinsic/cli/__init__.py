@@ -55,7 +55,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     """Runs one sub-command; returns the exit code (0, 1 on an unexpected
     failure, 2 on a user mistake, 130 when interrupted)."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as done:  # --help (0) or a rejected argument (2)
+        return done.code if isinstance(done.code, int) else 2
     args.debug = getattr(args, 'debug', False)
     args.quiet = getattr(args, 'quiet', False)
     if args.command is None:

@@ -1,8 +1,12 @@
 """What every sub-command shares: the user-error type, argument types that
 reject bad values in one line, the output folder and progress bars."""
 import argparse
+import inspect
 import math
 import os
+import sys
+import time
+from contextlib import contextmanager
 from typing import Iterable, Optional
 
 from tqdm.auto import tqdm
@@ -63,11 +67,10 @@ def nonnegative_int(text: str) -> int:
     return _number(int, text, 0, strict=False)
 
 
-def existing_path(text: str) -> str:
-    """argparse type: a file or folder that exists."""
-    if not os.path.exists(text):
-        raise argparse.ArgumentTypeError(f"{text!r} does not exist")
-    return text
+def default_of(function, name: str):
+    """The default of argument ``name`` of a library ``function`` (or
+    class): the library owns the value, the command line shows it."""
+    return inspect.signature(function).parameters[name].default
 
 
 def output_folder(path: str) -> str:
@@ -99,5 +102,24 @@ def common_options() -> argparse.ArgumentParser:
                         help='show the Python traceback of an error')
     parent.add_argument('--quiet', action='store_true',
                         default=argparse.SUPPRESS,
-                        help='no progress bars')
+                        help='no progress bars or progress lines')
     return parent
+
+
+@contextmanager
+def stage(name: str, quiet: bool, seconds: dict, key: str):
+    """Times a stage into ``seconds[key]`` and reports it on stderr
+    (progress, not the result): ``name ...`` when it starts, its time
+    or ``failed`` when it ends, so a progress bar may run in between."""
+    if not quiet:
+        print(f"{name} ...", file=sys.stderr, flush=True)
+    start = time.perf_counter()
+    try:
+        yield
+    except BaseException:
+        if not quiet:
+            print(f"{name}: failed", file=sys.stderr, flush=True)
+        raise
+    seconds[key] = round(time.perf_counter() - start, 3)
+    if not quiet:
+        print(f"{name}: {seconds[key]:.2f} s", file=sys.stderr, flush=True)

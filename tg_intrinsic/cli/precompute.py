@@ -12,7 +12,6 @@ the next run skips them; OUTPUT/precompute.json records the kind and the
 settings, and a rerun with other settings stops unless --overwrite. Files
 that fail are listed at the end and in OUTPUT/failures.json (exit code 2);
 the others are still written."""
-import inspect
 import json
 import os
 import textwrap
@@ -20,9 +19,9 @@ import time
 import traceback
 from typing import Dict, List, Optional, Tuple
 
-from .common import (ArgumentParser, UsageError, common_options, one_line,
-                     positive_float, positive_int, nonnegative_float,
-                     nonnegative_int, progress)
+from .common import (ArgumentParser, UsageError, common_options, default_of,
+                     nonnegative_float, nonnegative_int, one_line,
+                     positive_float, positive_int, progress)
 
 HELP = 'precompute operators, log maps or hierarchies for a folder of meshes'
 EXAMPLE = """examples:
@@ -63,12 +62,6 @@ KINDS = {
               "edge_index_l, prolong_index_l, prolong_weight_l, ... per "
               "level."),
 }
-
-
-def default_of(function, name: str):
-    """The default of argument ``name`` of a library ``function`` (or
-    class): the library owns the value, the command line shows it."""
-    return inspect.signature(function).parameters[name].default
 
 
 def add_arguments(parser):

@@ -12,11 +12,9 @@ smoothed ones), result.png (the result drawn on the surface) and
 report.json (the problem, the Laplacian, the hierarchy, the residual of
 every cycle and the timings)."""
 import os
-import sys
 import time
-from contextlib import contextmanager
 
-from .common import (UsageError, output_folder,
+from .common import (UsageError, default_of, stage, output_folder,
                      positive_float, positive_int)
 
 HELP = 'smooth a signal or solve a screened Poisson problem with Gravo MG'
@@ -38,7 +36,6 @@ vertices) or NAME alone (a vertex property of MESH)."""
 def add_arguments(parser):
     from tg_intrinsic.solvers import smooth
     from tg_intrinsic.solvers.gravo_mg import CYCLES
-    from .precompute import default_of
     parser.add_argument('mesh', metavar='MESH',
                         help='an OBJ, OFF, PLY or STL mesh or point cloud')
     problem = parser.add_mutually_exclusive_group(required=True)
@@ -79,23 +76,6 @@ def add_arguments(parser):
                         help='hierarchy: smallest level size; surfaces with '
                         'fewer points are solved directly (default: '
                         '%(default)s)')
-
-
-@contextmanager
-def _stage(name: str, quiet: bool, times: dict, key: str):
-    """Times a stage and prints it on stderr (progress, not the result)."""
-    if not quiet:
-        print(f"{name} ...", end='', file=sys.stderr, flush=True)
-    start = time.perf_counter()
-    try:
-        yield
-    except BaseException:
-        if not quiet:
-            print(' failed', file=sys.stderr, flush=True)
-        raise
-    times[key] = time.perf_counter() - start
-    if not quiet:
-        print(f" {times[key]:.2f} s", file=sys.stderr, flush=True)
 
 
 def _problem(args):
@@ -142,7 +122,7 @@ def run(args):
     quiet = args.quiet
     times = {}
     start = time.perf_counter()
-    with _stage(f"reading {args.mesh}", quiet, times, 'read'):
+    with stage(f"reading {args.mesh}", quiet, times, 'read'):
         pos, face, properties = read_surface(args.mesh)
         n = len(pos)
         y = pos.copy() if args.signal is None else \
@@ -162,7 +142,7 @@ def run(args):
     else:
         laplacian = 'cotan'
 
-    with _stage(f"building the hierarchy of {n} points", quiet, times,
+    with stage(f"building the hierarchy of {n} points", quiet, times,
                 'hierarchy'):
         coarsen = GravoHierarchy(ratio=args.ratio,
                                  lower_bound=args.lower_bound)
@@ -170,7 +150,7 @@ def run(args):
     sizes = [n] + [P.shape[1] for P in solver.prolongations]
 
     channels = y.reshape(n, -1).shape[1]
-    with _stage(f"solving {equation} ({channels} channel(s))", quiet, times,
+    with stage(f"solving {equation} ({channels} channel(s))", quiet, times,
                 'total_solve'):
         options = dict(y=torch.from_numpy(y), solver=solver, tol=args.tol,
                        cycle=args.cycle, max_iter=args.max_cycles)
@@ -190,7 +170,7 @@ def run(args):
     fairing = args.signal is None
     ply_path = os.path.join(out, 'result.ply')
     png_path = os.path.join(out, 'result.png')
-    with _stage('writing result.ply and result.png', quiet, times, 'write'):
+    with stage('writing result.ply and result.png', quiet, times, 'write'):
         write_ply(ply_path, x if fairing else pos, face,
                   properties={'signal': y, 'result': x})
         values, label, what = _drawn_values(x, y, fairing, args.signal)

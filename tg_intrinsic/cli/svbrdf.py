@@ -15,14 +15,12 @@ with a colour bar, and report.json (points, views, observations per
 point, seconds per stage, losses, mean entropy, and errors against
 ground_truth.npz when the scene folder has one). Every file is written
 atomically."""
-import inspect
 import os
 import sys
 import time
-from contextlib import contextmanager
 
-from .common import (UsageError, nonnegative_float, nonnegative_int,
-                     output_folder, positive_int)
+from .common import (UsageError, default_of, stage, nonnegative_float,
+                     nonnegative_int, output_folder, positive_int)
 
 HELP = 'recover SVBRDF maps and their uncertainty from HDR photographs'
 
@@ -66,17 +64,12 @@ def _unit_float(text: str) -> float:
     return value
 
 
-def _default(function, name):
-    """The library's default of one argument (the library owns it)."""
-    return inspect.signature(function).parameters[name].default
-
-
 def add_arguments(parser):
     from tg_intrinsic.nn import FrequencySVBRDF
     from tg_intrinsic.transforms import FitSphericalHarmonics
-    steps = _default(FrequencySVBRDF.fit, 'steps')
-    tv_weight = _default(FrequencySVBRDF.fit, 'tv_weight')
-    l_max = _default(FitSphericalHarmonics.__init__, 'l_max')
+    steps = default_of(FrequencySVBRDF.fit, 'steps')
+    tv_weight = default_of(FrequencySVBRDF.fit, 'tv_weight')
+    l_max = default_of(FitSphericalHarmonics.__init__, 'l_max')
     parser.add_argument('scene', nargs='?', metavar='SCENE_DIR',
                         help='the scene folder (format below)')
     parser.add_argument('--out', default=None, metavar='DIR',
@@ -133,16 +126,6 @@ def add_arguments(parser):
     example.add_argument('--seed', type=nonnegative_int, default=0,
                          help='of the example\'s materials and sun '
                          '(default: 0)')
-
-
-@contextmanager
-def _stage(name: str, quiet: bool, seconds: dict, key: str):
-    """Times a stage and shows it on stderr (progress, not the result)."""
-    if not quiet:
-        print(f"{name} ...", file=sys.stderr, flush=True)
-    start = time.perf_counter()
-    yield
-    seconds[key] = round(time.perf_counter() - start, 3)
 
 
 def _device(text: str):
@@ -238,7 +221,7 @@ def recover(args) -> int:
     dtype = getattr(torch, args.dtype)
     l_max = args.l_max if args.l_max is not None else (
         SPLIT_SUM_L_MAX if args.specular_model == 'split_sum'
-        else _default(FitSphericalHarmonics.__init__, 'l_max'))
+        else default_of(FitSphericalHarmonics.__init__, 'l_max'))
     scene = args.scene
     truth_path = os.path.join(scene, GROUND_TRUTH_FILE)
     seconds = {}
@@ -255,22 +238,22 @@ def recover(args) -> int:
         print(f"read {scene}: {scene_summary(data)}", file=sys.stderr,
               flush=True)
     data = data.to(device)
-    with _stage('projecting the points into the views', args.quiet,
+    with stage('projecting the points into the views', args.quiet,
                 seconds, 'project'):
         data = ProjectViews()(data)
-    with _stage(f'fitting spherical harmonics (l_max = {l_max})',
+    with stage(f'fitting spherical harmonics (l_max = {l_max})',
                 args.quiet, seconds, 'fit_spherical_harmonics'):
         data = FitSphericalHarmonics(l_max=l_max)(data)
-    with _stage('spectral uncertainty', args.quiet, seconds,
+    with stage('spectral uncertainty', args.quiet, seconds,
                 'spectral_uncertainty'):
         data = SpectralUncertainty(store_likelihood=False)(data)
     model = FrequencySVBRDF(data.num_nodes,
                             specular_model=args.specular_model).to(device)
-    with _stage(f'fitting ({args.steps} steps)', args.quiet, seconds,
+    with stage(f'fitting ({args.steps} steps)', args.quiet, seconds,
                 'fit'):
         result = model.fit(data, steps=args.steps, tv_weight=args.tv_weight,
                            metallic=args.metallic, progress=not args.quiet)
-    with _stage('writing', args.quiet, seconds, 'write'):
+    with stage('writing', args.quiet, seconds, 'write'):
         maps = {name: value for name, value in result.maps().items()}
         files = _write_outputs(out, data, result, maps,
                                os.path.basename(os.path.normpath(

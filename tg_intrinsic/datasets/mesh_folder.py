@@ -4,7 +4,6 @@ import os
 import os.path as osp
 from typing import Callable, List, Optional, Tuple
 
-import numpy as np
 import torch
 from torch_geometric.data import InMemoryDataset
 from tqdm.auto import tqdm

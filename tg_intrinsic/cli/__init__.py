@@ -70,6 +70,8 @@ def main(argv: Optional[List[str]] = None) -> int:
             warnings.showwarning = _show_warning
         try:
             return args.run(args) or 0
+        except SystemExit as done:  # a late parser.error(): already said
+            return done.code if isinstance(done.code, int) else 2
         except USER_ERRORS as error:
             if args.debug:
                 raise

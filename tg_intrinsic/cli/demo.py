@@ -15,8 +15,8 @@ figures.
    with an uncertainty per point; errors against the ground truth and the
    correlation of entropy with the error.
 
-On a 2-core CPU the demo takes a few minutes (--quick: about one); the
-synthetic data sets are cached under --root.
+On a 2-core CPU the demo takes about five minutes (--quick: about half a
+minute); the synthetic data sets are cached under --root.
 """
 import os
 import time
@@ -26,7 +26,7 @@ import numpy as np
 HELP = 'run all four methods on generated data; figures and a summary'
 EXAMPLE = """examples:
   tg-intrinsic demo                      # writes runs/demo/summary.md, figures
-  tg-intrinsic demo --quick --out /tmp/d # smaller everything, about a minute
+  tg-intrinsic demo --quick --out /tmp/d # smaller everything, half a minute
   tg-intrinsic demo --only gravo svbrdf  # some parts only
 """
 
@@ -65,7 +65,8 @@ def add_arguments(parser):
                         help='cache folder of the synthetic data sets '
                         '(default: data)')
     parser.add_argument('--quick', action='store_true',
-                        help='smaller data and fewer epochs (about a minute)')
+                        help='smaller data and fewer epochs (about half a '
+                        'minute; a smoke test, not results)')
     parser.add_argument('--only', nargs='+', choices=PARTS, default=None,
                         metavar='PART',
                         help=f"run only these parts: {', '.join(PARTS)}")

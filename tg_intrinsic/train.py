@@ -96,10 +96,9 @@ def hsn_pipeline(radius: float = 0.2, rings: int = 6, max_order: int = 1,
                     HarmonicPrecompute(rings, max_order)])
 
 
-def build_mesh_datasets(args):
-    """Train and test lists of precomputed meshes for HSN (the vertices are
-    the points). The precomputation is cached under ``root/hsn_cache``,
-    keyed by the data set and every setting it depends on."""
+def mesh_splits(args):
+    """The train and test meshes of ``args.dataset`` as they are, before
+    any HSN precomputation."""
     from tg_intrinsic.datasets import MeshFolder, SyntheticSHREC
     if args.dataset == 'synthetic_shrec':
         kwargs = dict(seed=args.data_seed, task=args.task)
@@ -120,6 +119,14 @@ def build_mesh_datasets(args):
     else:
         raise ValueError("--model hsn works on meshes: use --dataset "
                          "synthetic_shrec or mesh_folder")
+    return sets
+
+
+def build_mesh_datasets(args):
+    """Train and test lists of precomputed meshes for HSN (the vertices are
+    the points). The precomputation is cached under ``root/hsn_cache``,
+    keyed by the data set and every setting it depends on."""
+    sets = mesh_splits(args)
     num_classes = sets[0].num_classes
     # The precomputation is deterministic: cache it beside the data.
     key = json.dumps([args.dataset, args.task, args.mesh_root,

@@ -123,7 +123,8 @@ def baseline_accuracies(train_set, test_set, spectrum: bool) -> dict:
 def learning_part(model: str, args, out: str) -> dict:
     """Trains ``model`` with the library's training loop and compares it
     with the baselines on the same test shapes."""
-    from tg_intrinsic.train import build_datasets, parse_args, train
+    from tg_intrinsic.train import (build_datasets, mesh_splits,
+                                    parse_args, train)
     from tg_intrinsic.io.figures import line_figure
     dataset = 'synthetic_modelnet' if model == 'deltanet' else \
         'synthetic_shrec'
@@ -141,18 +142,8 @@ def learning_part(model: str, args, out: str) -> dict:
             dataset, options.root, options.num_points,
             seed=options.data_seed,
             shapes_per_class=options.shapes_per_class)
-    else:
-        from tg_intrinsic.datasets import SyntheticSHREC
-        # the meshes the network saw, without its precomputed inputs
-        path = os.path.join(options.root, 'SyntheticSHREC')
-        kwargs = dict(seed=options.data_seed,
-                      num_vertices=tuple(options.num_vertices),
-                      num_per_class=options.shapes_per_class,
-                      num_train_per_class=max(1,
-                                              options.shapes_per_class // 2),
-                      log=False)
-        train_set, test_set = (SyntheticSHREC(path, split, **kwargs)
-                               for split in ('train', 'test'))
+    else:  # the meshes the network saw, without its precomputed inputs
+        train_set, test_set = mesh_splits(options)
     baselines = baseline_accuracies(train_set, test_set,
                                     spectrum=model == 'hsn')
     history = metrics['history']

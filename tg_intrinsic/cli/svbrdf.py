@@ -254,7 +254,7 @@ def recover(args) -> int:
         result = model.fit(data, steps=args.steps, tv_weight=args.tv_weight,
                            metallic=args.metallic, progress=not args.quiet)
     with stage('writing', args.quiet, seconds, 'write'):
-        maps = {name: value for name, value in result.maps().items()}
+        maps = result.maps()
         files = _write_outputs(out, data, result, maps,
                                os.path.basename(os.path.normpath(
                                    os.path.abspath(scene))))

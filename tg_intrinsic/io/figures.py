@@ -107,6 +107,15 @@ def splat_index(pos: torch.Tensor, intrinsics: torch.Tensor,
     return image
 
 
+def value_range(values, vmin=None, vmax=None):
+    """The colour range ``(lo, hi)`` of ``values``: the given limits, else
+    the finite extremes; a constant signal gets a range of width 1."""
+    values = np.asarray(values, dtype=np.float64)
+    lo = float(np.nanmin(values)) if vmin is None else float(vmin)
+    hi = float(np.nanmax(values)) if vmax is None else float(vmax)
+    return (lo, hi) if hi > lo else (lo, lo + 1.0)
+
+
 def render_surface(pos, face=None, values=None, colors=None, normal=None,
                    cmap='viridis', vmin=None, vmax=None,
                    views: Sequence[str] = ('front-left', 'front-right'),
@@ -125,9 +134,8 @@ def render_surface(pos, face=None, values=None, colors=None, normal=None,
                       0, 1)
     elif values is not None:
         values = np.asarray(values, dtype=np.float64).reshape(n)
-        lo = np.nanmin(values) if vmin is None else vmin
-        hi = np.nanmax(values) if vmax is None else vmax
-        scaled = (values - lo) / (hi - lo if hi > lo else 1.0)
+        lo, hi = value_range(values, vmin, vmax)
+        scaled = (values - lo) / (hi - lo)
         rgb = matplotlib.colormaps[cmap](np.clip(scaled, 0, 1))[:, :3]
         rgb[np.isnan(values)] = 0.5
     else:
@@ -192,10 +200,7 @@ def draw_surface(path: str, pos, face=None, values=None, colors=None,
         ax.set_title(f'view from {view}', fontsize=9)
         ax.set_axis_off()
     if values is not None and colors is None:
-        finite = np.asarray(values, dtype=np.float64)
-        lo = np.nanmin(finite) if vmin is None else vmin
-        hi = np.nanmax(finite) if vmax is None else vmax
-        norm = matplotlib.colors.Normalize(lo, hi if hi > lo else lo + 1)
+        norm = matplotlib.colors.Normalize(*value_range(values, vmin, vmax))
         fig.colorbar(matplotlib.cm.ScalarMappable(norm, cmap), cax=axes[-1],
                      label=label)
     fig.suptitle(title)

@@ -3,6 +3,7 @@ from .parallel_transport_pool import ParallelTransportPool
 from .parallel_transport_unpool import ParallelTransportUnpool
 from .gravo_pool import GravoPool
 from .gravo_unpool import GravoUnpool
+from .global_max_pool import global_max_pool
 
 __all__ = ['ParallelTransportPool', 'ParallelTransportUnpool', 'GravoPool',
-           'GravoUnpool']
+           'GravoUnpool', 'global_max_pool']

@@ -3,9 +3,10 @@ from typing import Sequence
 import torch
 from torch import Tensor
 from torch_geometric.data import Data
-from torch_geometric.nn import global_max_pool, global_mean_pool
+from torch_geometric.nn import global_mean_pool
 
 from tg_intrinsic.nn.delta_conv import scalar_mlp
+from tg_intrinsic.pool.global_max_pool import global_max_pool
 from tg_intrinsic.nn.models._deltanet_base import DeltaNetBase
 
 

@@ -3,9 +3,9 @@ from typing import Optional, Sequence
 import torch
 from torch import Tensor
 from torch_geometric.data import Data
-from torch_geometric.nn import global_max_pool
 
 from tg_intrinsic.nn.delta_conv import scalar_mlp
+from tg_intrinsic.pool.global_max_pool import global_max_pool
 from tg_intrinsic.nn.models._deltanet_base import DeltaNetBase
 
 

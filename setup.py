@@ -13,6 +13,7 @@ install_requires = [
     'robust-laplacian>=0.2.7',
     'tqdm>=4.60',
     'matplotlib>=3.7',
+    'fast-simplification>=0.2',  # Decimate (preserve_border from 0.2)
 ]
 
 extras_require = {
@@ -24,6 +25,8 @@ extras_require = {
         # independent oracles of the HDR readers (tests/io)
         'opencv-python-headless>=4.8',
         'OpenEXR>=3.2',
+        # ScanObjectNN's HDF5 files (tests/datasets)
+        'h5py>=3.8',
     ],
     # log_map(method='vector_heat'): geometry-central's vector heat method.
     'heat': ['potpourri3d>=1.0'],
@@ -31,6 +34,8 @@ extras_require = {
     'scatter': ['torch-scatter'],
     # read_exr; Radiance .hdr needs nothing extra.
     'exr': ['OpenEXR>=3.2'],
+    # ScanObjectNN's HDF5 files.
+    'h5': ['h5py>=3.8'],
     # The external renderer of the SVBRDF oracle test and benchmark
     # (its llvm variant also needs: apt-get install libllvm19).
     'mitsuba': ['mitsuba>=3.5'],

@@ -4,8 +4,16 @@ r"""Offline, deterministic datasets of curved surfaces (no downloads).
   classification and part segmentation.
 * :class:`SyntheticModelNet`: ModelNet-style rigid objects as point clouds
   with normals.
-* :class:`MeshFolder`: a real dataset stored as
-  ``root/<class>/<split>/*.obj|*.off|*.ply``.
+* :class:`MeshFolder`: meshes stored as
+  ``root/<class>/<split>/*.obj|*.off|*.ply`` (classification; ModelNet's
+  ``.off`` release, MeshCNN's SHREC'11) or ``root/<split>/*`` with label
+  files (segmentation; MeshCNN's human_seg / coseg with ``.eseg`` files).
+* :class:`PointCloudFolder`: the same layouts for point clouds
+  (``.ply|.txt|.xyz|.npy|.pts``).
+* :class:`ModelNetResampled`, :class:`ShapeNetPartNormal`,
+  :class:`ScanObjectNN`: standard point cloud benchmarks read from the
+  user's local copy (PointNet++'s ModelNet and ShapeNet-Part releases,
+  ScanObjectNN's HDF5 files); nothing is downloaded.
 * :func:`svbrdf_scene`: a multi-view capture of a sphere or mesh with a
   spatially varying principled BRDF under an environment map, rendered by
   an independent estimator of the reflection integral (ground truth for
@@ -15,6 +23,10 @@ r"""Offline, deterministic datasets of curved surfaces (no downloads).
 from .synthetic_shrec import SyntheticSHREC
 from .synthetic_modelnet import SyntheticModelNet
 from .mesh_folder import MeshFolder
+from .point_cloud_folder import PointCloudFolder
+from .modelnet_resampled import ModelNetResampled
+from .shapenet_part_normal import ShapeNetPartNormal
+from .scanobjectnn import ScanObjectNN
 from .svbrdf_scene import svbrdf_scene, look_at_cameras
 from .surfaces import bumpy_torus
 
@@ -22,6 +34,10 @@ __all__ = [
     'SyntheticSHREC',
     'SyntheticModelNet',
     'MeshFolder',
+    'PointCloudFolder',
+    'ModelNetResampled',
+    'ShapeNetPartNormal',
+    'ScanObjectNN',
     'svbrdf_scene',
     'look_at_cameras',
     'bumpy_torus',

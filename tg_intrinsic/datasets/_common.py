@@ -1,10 +1,16 @@
 """Helpers shared by the datasets (private)."""
 import hashlib
+import json
+import os
 import os.path as osp
 import re
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 from torch_geometric.data import InMemoryDataset
+from tqdm.auto import tqdm
+
+from tg_intrinsic.data import IntrinsicData
 
 
 def processing_suffix(pre_transform, pre_filter) -> str:
@@ -37,10 +43,28 @@ class GeneratedDataset(InMemoryDataset):
         pass
 
 
-def check_split(split):
-    if split not in ('train', 'test'):
-        raise ValueError(f"'split' must be 'train' or 'test', got {split!r}")
-    return split
+def check_option(value, name, options):
+    if value not in options:
+        raise ValueError(f"'{name}' must be one of {tuple(options)}, got "
+                         f"{value!r}")
+    return value
+
+
+def check_task(task, **segmentation_options):
+    """``task`` is one of :data:`TASKS`; the ``segmentation_options``
+    (``name=(value, default)``) keep their defaults for classification."""
+    check_option(task, 'task', TASKS)
+    changed = [name for name, (value, default) in
+               segmentation_options.items() if value != default]
+    if task == 'classification' and changed:
+        raise ValueError(f"{', '.join(map(repr, changed))} apply to "
+                         f"task='segmentation' only; classification takes "
+                         f"its classes from the folder names")
+    return task
+
+
+def check_split(split, splits=('train', 'test')):
+    return check_option(split, 'split', splits)
 
 
 def check_int(value, name, minimum):
@@ -74,3 +98,160 @@ def save_atomic(dataset_cls, data_list, path):
     from tg_intrinsic.utils import atomic_torch_save
     data, slices = dataset_cls.collate(data_list)
     atomic_torch_save((data.to_dict(), slices, data.__class__), path)
+
+
+PROCESSED = 'processed_tg_intrinsic'
+TASKS = ('classification', 'segmentation')
+
+
+def processed_folder(root, pre_transform, pre_filter) -> str:
+    """``root/processed_tg_intrinsic`` plus :func:`processing_suffix`."""
+    return osp.join(root, PROCESSED + processing_suffix(pre_transform,
+                                                        pre_filter))
+
+
+def list_files(folder: str, extensions: Sequence[str]) -> List[str]:
+    """Sorted paths of the files in ``folder`` whose (lower-case)
+    extension is in ``extensions``; ``[]`` if there is no such folder."""
+    if not osp.isdir(folder):
+        return []
+    return [osp.join(folder, name) for name in sorted(os.listdir(folder))
+            if osp.splitext(name)[1].lower() in extensions
+            and osp.isfile(osp.join(folder, name))]
+
+
+def class_folders(root: str, splits: Sequence[str]) -> List[str]:
+    """Sorted names of the folders of ``root`` that hold a folder named
+    after one of ``splits`` (hidden and processed folders skipped)."""
+    return [name for name in sorted(os.listdir(root))
+            if not name.startswith(('.', PROCESSED))
+            and any(osp.isdir(osp.join(root, name, s)) for s in splits)]
+
+
+def find_label_file(stem: str, beside: str, beside_extensions,
+                    folders, folder_extensions) -> Optional[str]:
+    """The label file of ``stem``: ``beside/stem.EXT`` for an extension in
+    ``beside_extensions``, or ``FOLDER/stem.EXT`` for a folder in
+    ``folders`` and an extension in ``folder_extensions``; ``None`` if
+    there is none, a :class:`ValueError` listing them if there are
+    several."""
+    candidates = [osp.join(beside, stem + ext) for ext in beside_extensions]
+    candidates += [osp.join(folder, stem + ext) for folder in folders
+                   for ext in folder_extensions]
+    found = [path for path in candidates if osp.isfile(path)]
+    if len(found) > 1:
+        raise ValueError(f"several label files for '{stem}': {found}; keep "
+                         f"one of them")
+    return found[0] if found else None
+
+
+def file_manifest(root: str, paths: Sequence[str]) -> Dict[str, list]:
+    """``{name relative to root: [size, mtime_ns]}`` of every input file."""
+    manifest = {}
+    for path in paths:
+        stat = os.stat(path)
+        manifest[osp.relpath(path, root)] = [stat.st_size, stat.st_mtime_ns]
+    return manifest
+
+
+class FolderDataset(InMemoryDataset):
+    """An InMemoryDataset read from the user's local folder, never
+    downloaded.
+
+    The processed data go to ``root/processed_tg_intrinsic<suffix>/`` (a
+    folder per pre-transform and pre-filter, see
+    :func:`processing_suffix`) as ``<cache_name>.pt``, with
+    ``<cache_name>_meta.json`` (what :meth:`read` returns beside the data,
+    e.g. the class names) and ``<cache_name>_manifest.json``: the relative
+    name, size and modification time of every input file :meth:`scan`
+    lists. The files are read again when that manifest differs from the
+    folder's (a file added, removed or changed) or with
+    ``force_reload=True``. Every file is written atomically, the manifest
+    last.
+
+    Subclasses set ``LAYOUT`` (the folder layout, for error messages) and
+    ``SPLITS``, and define ``cache_name`` (a file name for the split and
+    every option that changes the data), ``scan()`` (the input files) and
+    ``read()`` (``(list of Data, meta dict)``).
+    """
+    LAYOUT = ''
+    SPLITS = ('train', 'test')
+
+    def __init__(self, root, split, transform, pre_transform, pre_filter,
+                 log, force_reload):
+        self.split = check_split(split, self.SPLITS)
+        root = osp.expanduser(os.fspath(root))
+        if not osp.isdir(root):
+            raise ValueError(f"{type(self).__name__}: '{root}' is not a "
+                             f"folder; expected the layout {self.LAYOUT}")
+        self.root = root
+        self.manifest = file_manifest(root, self.scan())
+        path = osp.join(processed_folder(root, pre_transform, pre_filter),
+                        self.cache_name + '_manifest.json')
+        stored = None
+        if osp.isfile(path):
+            with open(path) as f:
+                stored = json.load(f)
+        super().__init__(root, transform, pre_transform, pre_filter, log=log,
+                         force_reload=force_reload or stored != self.manifest)
+        self.load(self.processed_paths[0], data_cls=IntrinsicData)
+        with open(self.processed_paths[1]) as f:
+            self.meta = json.load(f)
+
+    @property
+    def raw_dir(self) -> str:
+        return self.root
+
+    @property
+    def raw_file_names(self):
+        return []
+
+    @property
+    def processed_dir(self) -> str:
+        return processed_folder(self.root, self.pre_transform,
+                                self.pre_filter)
+
+    @property
+    def processed_file_names(self):
+        return [self.cache_name + '.pt', self.cache_name + '_meta.json',
+                self.cache_name + '_manifest.json']
+
+    def class_items(self, extensions: Sequence[str]):
+        """``(classes, [(path, class index), ...])`` of the classification
+        layout ``root/<class>/<split>/*``: classes are the sorted folders
+        with a ``train`` or ``test`` folder."""
+        name = type(self).__name__
+        classes = class_folders(self.root, ('train', 'test'))
+        if not classes:
+            raise ValueError(f"{name}: no class folders with a 'train' or "
+                             f"'test' sub-folder in '{self.root}'; expected "
+                             f"the layout {self.LAYOUT}")
+        items = [(path, c) for c, cls in enumerate(classes)
+                 for path in list_files(osp.join(self.root, cls, self.split),
+                                        extensions)]
+        if not items:
+            raise ValueError(f"{name}: no {'/'.join(extensions)} files for "
+                             f"split '{self.split}' under '{self.root}' "
+                             f"(classes: {classes}); expected the layout "
+                             f"{self.LAYOUT}")
+        return classes, items
+
+    def progress(self, items, unit: str):
+        """``items`` with a progress bar when ``log`` is on."""
+        return tqdm(items, desc=f'Reading {type(self).__name__} '
+                    f'({self.split})', disable=not self.log, unit=unit)
+
+    def process(self):
+        from tg_intrinsic.utils import atomic_write_json
+        data_list, meta = self.read()
+        if self.pre_filter is not None:
+            data_list = [d for d in data_list if self.pre_filter(d)]
+            if not data_list:
+                raise ValueError(f"{type(self).__name__}: 'pre_filter' "
+                                 f"removed every example of split "
+                                 f"'{self.split}' in '{self.root}'")
+        if self.pre_transform is not None:
+            data_list = [self.pre_transform(d) for d in data_list]
+        save_atomic(type(self), data_list, self.processed_paths[0])
+        atomic_write_json(self.processed_paths[1], meta)
+        atomic_write_json(self.processed_paths[2], self.manifest)

@@ -11,7 +11,7 @@ from .mesh import (face_areas, face_normals, vertex_normals, lumped_mass,
                    cotan_weights, cotan_laplacian, mesh_edges,
                    edge_face_counts, is_closed_manifold,
                    remove_unreferenced_vertices, normalize_area,
-                   laplacian_spectrum)
+                   laplacian_spectrum, weld_vertices)
 from .sparse import to_scipy, from_scipy
 from .mls import mls_grad_div, build_mls_operators
 from .operators import SurfaceOperators
@@ -35,6 +35,7 @@ __all__ = [
     'remove_unreferenced_vertices',
     'normalize_area',
     'laplacian_spectrum',
+    'weld_vertices',
     'to_scipy',
     'from_scipy',
     'mls_grad_div',

@@ -360,3 +360,63 @@ def laplacian_spectrum(pos: Tensor, face: Tensor,
     values = sla.eigsh(S, k=num_eigenvalues + 1, M=sp.diags(mass),
                        sigma=-1e-8, which='LM', return_eigenvectors=False)
     return torch.from_numpy(np.sort(values)[1:] * mass.sum())
+
+
+def weld_vertices(pos: Tensor, face: Tensor, tolerance: float = 0.0
+                  ) -> Tuple[Tensor, Tensor, Tensor]:
+    r"""Merges vertices at the same position, e.g. to turn a triangle soup
+    (every face with its own three vertices, as many exporters write OBJ
+    files) into a connected mesh.
+
+    With :obj:`tolerance=0` exactly equal positions are merged. With
+    :obj:`tolerance > 0`, vertices closer than :obj:`tolerance` times the
+    bounding-box diagonal are merged, transitively (the connected
+    components of the "closer than" graph, found with a
+    :class:`scipy.spatial.cKDTree`). A merged vertex keeps the position of
+    its first (lowest-index) member, and new vertices are numbered in the
+    order of their first occurrence, so a mesh without duplicates comes
+    back unchanged (:obj:`inverse` is the identity). Faces are only
+    re-indexed: none is dropped, even if welding with a tolerance makes
+    it degenerate. Per-vertex values follow the weld through
+    :obj:`inverse` (e.g. ``scatter(x, inverse, reduce='mean')``).
+
+    Args:
+        pos (torch.Tensor): Vertex positions.
+        face (torch.Tensor): Triangles in PyG layout.
+        tolerance (float, optional): Merge distance relative to the
+            bounding-box diagonal. (default: :obj:`0.0`, exact duplicates)
+
+    Returns:
+        (pos, face, inverse): the welded positions, the re-indexed
+        triangles and, for every old vertex, its new index.
+
+    Shapes:
+        - **input:** pos :math:`(N, 3)`, face :math:`(3, F)`
+        - **output:** pos :math:`(M, 3)`, face :math:`(3, F)`,
+          inverse :math:`(N)` long, :math:`M \le N`
+    """
+    pos = check_points(pos)
+    face = check_faces(face, pos.size(0), pos, allow_degenerate_indices=True)
+    tolerance = check_positive_float(tolerance, 'tolerance', allow_zero=True)
+    p = pos.detach().cpu().numpy() + 0.0  # + 0.0 turns -0.0 into 0.0
+    if tolerance == 0.0:
+        _, group = np.unique(p, axis=0, return_inverse=True)
+        group = group.reshape(-1)
+    else:
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+        from scipy.spatial import cKDTree
+        radius = tolerance * float(np.linalg.norm(np.ptp(p, axis=0)))
+        pairs = cKDTree(p).query_pairs(radius, p=2.0, output_type='ndarray')
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                           shape=(len(p), len(p)))
+        _, group = connected_components(graph, directed=False)
+    # Renumber the groups in the order of their first vertex.
+    first = np.full(group.max() + 1, len(p), dtype=np.int64)
+    np.minimum.at(first, group, np.arange(len(p)))
+    rank = np.empty_like(first)
+    order = np.argsort(first, kind='stable')
+    rank[order] = np.arange(len(order))
+    inverse = torch.from_numpy(rank[group]).to(pos.device)
+    keep = torch.from_numpy(first[order]).to(pos.device)
+    return pos[keep], inverse[face], inverse

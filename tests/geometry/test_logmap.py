@@ -583,3 +583,139 @@ def test_malformed_input_raises_or_is_finite(data):
                    call(vertex_area_weights, pos, face=face, normal=pos)):
         if result is not None:
             assert_valid(result, n)
+
+
+# ----------------------------------------------------------------------------
+# the size of the disc graph, estimated before it is built
+# ----------------------------------------------------------------------------
+def unit_area(pos, face):
+    from tg_intrinsic.geometry import normalize_area
+    return normalize_area(pos, face), face
+
+
+def estimate_cases():
+    from tg_intrinsic.datasets import bumpy_torus
+    sphere = unit_area(*icosphere(3))
+    torus = bumpy_torus(2000)
+    pos, face = icosphere(3)
+    scale = torch.tensor([6.0, 0.5, 0.5], dtype=pos.dtype)
+    stretched = unit_area(pos * scale, face)
+    plate = unit_area(pos * torch.tensor([1.0, 1.0, 0.03],
+                                         dtype=pos.dtype), face)
+    return {'sphere': (sphere, 0.2), 'bumpy torus': (unit_area(
+        torus.pos, torus.face), 0.15), 'stretched': (stretched, 0.2),
+        'stretched, small discs': (stretched, 0.05),
+        'flattened': (plate, 0.1), 'open grid': (grid_mesh(30), 0.15)}
+
+
+@pytest.mark.parametrize('name', list(estimate_cases()))
+def test_estimated_disc_edges_match_the_real_count(name):
+    from tg_intrinsic.geometry.logmap import estimate_disc_edges
+    (pos, face), eps = estimate_cases()[name]
+    real = geodesic_neighbourhoods(pos, eps, face=face)[0].size(1)
+    estimate = estimate_disc_edges(pos, eps, face=face)
+    # The contract is a factor 1.5; the sampled marching does ~10 %.
+    assert 1 / 1.25 < estimate / real < 1.25, (estimate, real)
+    # ... also with a cap and for a subset of centres
+    capped = geodesic_neighbourhoods(pos, eps, face=face,
+                                     max_neighbors=20)[0].size(1)
+    assert 1 / 1.25 < estimate_disc_edges(
+        pos, eps, face=face, max_neighbors=20) / capped < 1.25
+    centers = some_centres(pos.size(0), 100)
+    sub = geodesic_neighbourhoods(pos, eps, face=face,
+                                  centers=centers)[0].size(1)
+    assert 1 / 1.25 < estimate_disc_edges(
+        pos, eps, face=face, centers=centers) / sub < 1.25
+
+
+def test_estimated_disc_edges_on_point_clouds():
+    from tg_intrinsic.geometry.logmap import estimate_disc_edges
+    pos = fibonacci_sphere(3000)
+    for eps in (0.1, 0.4):
+        real = geodesic_neighbourhoods(pos, eps, normal=pos)[0].size(1)
+        estimate = estimate_disc_edges(pos, eps)
+        assert 1 / 1.25 < estimate / real < 1.25
+    # a stretched cloud (an ellipsoid), discs that wrap around it
+    stretched = pos * torch.tensor([3.0, 0.3, 0.3], dtype=pos.dtype)
+    real = geodesic_neighbourhoods(stretched, 0.5)[0].size(1)
+    assert 1 / 1.25 < estimate_disc_edges(stretched, 0.5) / real < 1.25
+
+
+def test_hsn_bytes_per_edge_matches_the_pipeline_output():
+    from torch_geometric.data import Data
+    from tg_intrinsic.geometry.logmap import hsn_bytes_per_edge
+    from tg_intrinsic.train import hsn_pipeline
+    for dtype in (torch.float32, torch.float64):
+        pos, face = icosphere(3, dtype=dtype)
+        out = hsn_pipeline()(Data(pos=pos, face=face))
+        per_edge = [key for key in out.keys() if key.split('_')[0] in (
+            'edge', 'logmap', 'transport', 'harmonic')
+            and not key.startswith('logmap_radius')]
+        assert {'edge_index', 'logmap', 'transport', 'harmonic',
+                'edge_index_1', 'logmap_1', 'transport_1',
+                'harmonic_1'} == set(per_edge)
+        stored = sum(out[k].numel() * out[k].element_size()
+                     for k in per_edge)
+        measured = stored / out.edge_index.size(1)
+        assert abs(hsn_bytes_per_edge(dtype) / measured - 1) < 0.1
+
+
+@pytest.mark.filterwarnings('ignore:the disc graph')
+def test_disc_size_check_raises_before_marching(monkeypatch):
+    import re
+    from tg_intrinsic.geometry import logmap as L
+    pos, face = unit_area(*icosphere(3))
+
+    def no_marching(*args, **kwargs):
+        raise AssertionError('marched before the size check')
+    monkeypatch.setattr(L, 'march_from', no_marching)
+    limit = 2 ** 20  # 1 MiB: the 50k edges at 155 bytes do not fit
+    with pytest.raises(ValueError) as info:
+        geodesic_neighbourhoods(pos, 0.2, face=face, max_memory=limit,
+                                bytes_per_edge=L.hsn_bytes_per_edge())
+    message = str(info.value)
+    for part in ('edges', 'MiB', 'max_memory', 'smaller radius',
+                 'Decimate(', 'FarthestPointResample(', 'max_neighbors=',
+                 'max_memory=None'):
+        assert part in message, part
+    monkeypatch.undo()
+    # The suggestions fit.
+    eps = float(re.search(r'radius \(about ([0-9.e-]+) fits\)',
+                          message).group(1))
+    cap = int(re.search(r'max_neighbors=(\d+)', message).group(1))
+    bytes_per_edge = L.hsn_bytes_per_edge()
+    for kwargs in ({'eps': eps}, {'eps': 0.2, 'max_neighbors': cap}):
+        e = kwargs.pop('eps')
+        edge_index, _ = geodesic_neighbourhoods(
+            pos, e, face=face, max_memory=limit,
+            bytes_per_edge=bytes_per_edge, **kwargs)
+        assert edge_index.size(1) * bytes_per_edge <= limit
+    # Off with None; a point cloud is checked as well.
+    geodesic_neighbourhoods(pos, 0.2, face=face, max_memory=None)
+    with pytest.raises(ValueError, match='max_memory'):
+        geodesic_neighbourhoods(pos, 0.3, normal=pos, max_memory=limit)
+
+
+def test_disc_size_check_warns_below_the_limit_and_skips_small_graphs(
+        monkeypatch):
+    from tg_intrinsic.geometry import logmap as L
+    pos, face = unit_area(*icosphere(3))
+    real = geodesic_neighbourhoods(pos, 0.2, face=face)[0].size(1)
+    # 60 bytes per edge, limit at twice the graph: above a quarter, warns.
+    with pytest.warns(UserWarning, match='neighbours per point'):
+        geodesic_neighbourhoods(pos, 0.2, face=face,
+                                max_memory=2 * real * 60.0,
+                                bytes_per_edge=60.0)
+    # Full discs (N^2 edges) far below the warning level: no estimate.
+    monkeypatch.setattr(L, '_estimate', None)
+    geodesic_neighbourhoods(pos, 0.2, face=face)
+    with pytest.raises(ValueError, match='max_memory'):
+        geodesic_neighbourhoods(pos, 0.2, face=face, max_memory=-1)
+
+
+def test_triangle_soup_is_rejected_with_a_fix():
+    pos, face = icosphere(2)
+    soup = pos[face.t().reshape(-1)]
+    soup_face = torch.arange(soup.size(0)).view(-1, 3).t()
+    with pytest.raises(ValueError, match='CleanMesh'):
+        geodesic_neighbourhoods(soup, 0.3, face=soup_face)

@@ -1,3 +1,4 @@
+import math
 import pytest
 import torch
 from torch_geometric.data import Data
@@ -56,4 +57,24 @@ def test_bad_input():
         RandomRotation(axis='w')
     with pytest.raises(ValueError, match=r"data.pos' of shape \[N, 3\]"):
         RandomRotation()(Data(pos=torch.zeros(4, 2)))
-    assert repr(RandomRotation('z')) == "RandomRotation(axis='z')"
+    with pytest.raises(ValueError, match="max_angle must be in"):
+        RandomRotation('x', max_angle=0)
+    assert repr(RandomRotation('z')) == \
+        "RandomRotation(axis='z', max_angle=180)"
+
+
+def test_euler_rotations_stay_within_the_angle():
+    # 'xyz' with max_angle a: R = Rz Ry Rx, each angle uniform in [-a, a].
+    # The rotation angle of R is then at most 3a, and about one axis it
+    # is exactly the drawn angle (trace = 1 + 2 cos(angle)).
+    from tg_intrinsic.transforms.random_rotation import random_rotation_matrix
+    generator = torch.Generator().manual_seed(0)
+    for _ in range(50):
+        matrix = random_rotation_matrix('xyz', generator, max_angle=10.0)
+        assert torch.allclose(matrix @ matrix.T, torch.eye(3,
+                              dtype=matrix.dtype), atol=1e-12)
+        angle = torch.arccos(((matrix.trace() - 1) / 2).clamp(-1, 1))
+        assert angle <= math.radians(30) + 1e-9
+        single = random_rotation_matrix('z', generator, max_angle=10.0)
+        assert single[2, 2] == 1 and abs(torch.atan2(
+            single[1, 0], single[0, 0])) <= math.radians(10) + 1e-12

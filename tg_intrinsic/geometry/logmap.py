@@ -22,23 +22,27 @@ Self-loops :math:`(i \to i)` get :math:`r = \theta = \phi = 0`. All angles
 are wrapped to :math:`(-\pi, \pi]`.
 """
 import importlib.util
+import math
+import warnings
 from typing import Optional, Tuple
 
 import numpy as np
 import torch
-from numba import njit, prange
+from numba import get_num_threads, njit, prange
 from torch import Tensor
 
 from . import _vector_heat
 from ._checks import (check_edge_index, check_faces, check_nondegenerate,
                       check_points, check_positive_float, check_positive_int,
                       check_tensor, check_vectors, same_device)
-from ._fmm import march_from, surface_index
+from ._fmm import march_from, march_many, surface_index
 from .frames import check_frames, tangent_frames
 from .mesh import edge_face_counts, face_areas, lumped_mass, vertex_normals
 from .neighbors import knn, radius
 
-__all__ = ['geodesic_neighbourhoods', 'log_map', 'vertex_area_weights']
+__all__ = ['geodesic_neighbourhoods', 'log_map', 'vertex_area_weights',
+           'estimate_disc_edges', 'check_disc_memory', 'hsn_bytes_per_edge',
+           'graph_bytes_per_edge', 'MAX_DISC_MEMORY']
 
 METHODS = ('fast', 'vector_heat')
 
@@ -60,6 +64,7 @@ def _check_mesh(pos: Tensor, face, strict: bool = False) -> Tensor:
         raise ValueError(f"{bad.numel()} vertex/vertices are not referenced "
                          f"by any triangle (first: {bad[:5].tolist()}), so "
                          f"no geodesic reaches them; drop them with "
+                         f"CleanMesh() or "
                          f"remove_unreferenced_vertices(pos, face)")
     p = pos.double()
     cross = torch.linalg.cross(p[face[1]] - p[face[0]],
@@ -86,6 +91,23 @@ def _check_mesh(pos: Tensor, face, strict: bool = False) -> Tensor:
                              "method needs an oriented manifold mesh, e.g. "
                              "fix it with trimesh's fix_winding()")
     return face
+
+
+def _check_welded(pos: Tensor):
+    """Mesh vertices at the same position are separate to the marching, so
+    discs would stop at them: a triangle soup (STL files, some exporters)
+    would give discs of one triangle, without any error."""
+    p = pos.detach().cpu().numpy() + 0.0  # -0.0 equals 0.0
+    order = np.lexsort(p.T[::-1])
+    repeated = int((p[order[1:]] == p[order[:-1]]).all(1).sum())
+    if repeated:
+        raise ValueError(f"{repeated} mesh vertex/vertices "
+                         f"repeat the position of another vertex (a "
+                         f"triangle soup, or seams split for texture "
+                         f"coordinates); geodesics cannot cross between "
+                         f"such copies, so the discs would stop there. Weld "
+                         f"them first: CleanMesh() before this transform, "
+                         f"or weld_vertices(pos, face)")
 
 
 def _check_centers(centers, pos: Tensor) -> Tensor:
@@ -255,13 +277,253 @@ def _fast_torch(pos: Tensor, frame: Tensor, edge_index: Tensor
 
 
 # ----------------------------------------------------------------------------
+# size of the disc graph, before building it
+# ----------------------------------------------------------------------------
+#: Default ``max_memory`` (bytes) of :func:`geodesic_neighbourhoods`,
+#: :class:`~tg_intrinsic.transforms.LogMap` and
+#: :class:`~tg_intrinsic.transforms.MultiscaleSupports`: 2 GiB. Above it they
+#: raise a :class:`ValueError` before any heavy work; ``max_memory=None``
+#: turns the check off.
+MAX_DISC_MEMORY = 2 * 1024 ** 3
+#: A warning is issued above this fraction of ``max_memory``.
+DISC_MEMORY_WARN_FRACTION = 0.25
+# Bytes per edge that building the graph itself holds at its peak: the
+# marching's neighbour and distance arrays (int64, float64) and their
+# concatenated copies, the centre index and the final [2, E] edge_index.
+_GRAPH_TRANSIENT_BYTES = 56
+# Vertex visits the sampled count may march in all (bounds its time to
+# about half a second).
+_SAMPLE_BUDGET = 100_000
+
+
+def hsn_bytes_per_edge(dtype: torch.dtype = torch.float32, rings: int = 6,
+                       max_order: int = 1, coarse_fraction: float = 0.25
+                       ) -> float:
+    r"""Bytes that the Harmonic Surface Network precomputation
+    (:func:`tg_intrinsic.train.hsn_pipeline`) keeps per edge of the
+    level-0 disc graph,
+
+    .. math::
+        b = \Big(\underbrace{16}_{\texttt{edge\_index}}
+        + \underbrace{3 s}_{\texttt{logmap},\ \texttt{transport}}
+        + \underbrace{2 s\, Q\, (P + 1)}_{\texttt{harmonic}}\Big)
+        (1 + f),
+
+    with :math:`s` the size of one real number of :obj:`dtype`, :math:`Q`
+    rings, orders :math:`0, \dots, P` and :math:`f` the number of level-1
+    edges per level-0 edge (a quarter of the points with twice the radius
+    gives the same number of neighbours per point, so :math:`f \approx
+    1/4`). For float32 and the paper's settings this is 155 bytes
+    (measured on an icosphere: 151); for float64 290 (measured: 283).
+
+    Args:
+        dtype (torch.dtype, optional): Dtype of the positions.
+            (default: :obj:`torch.float32`)
+        rings (int, optional): Rings :math:`Q`. (default: :obj:`6`)
+        max_order (int, optional): Highest order :math:`P`.
+            (default: :obj:`1`)
+        coarse_fraction (float, optional): :math:`f`.
+            (default: :obj:`0.25`)
+    """
+    size = torch.empty(0, dtype=dtype).element_size()
+    per_level = 16 + 3 * size + 2 * size * rings * (max_order + 1)
+    return float(per_level * (1.0 + coarse_fraction))
+
+
+def graph_bytes_per_edge(dtype: torch.dtype = torch.float32) -> float:
+    """Bytes per edge that :func:`geodesic_neighbourhoods` holds at its
+    peak: the marching's int64 neighbours and float64 distances (and their
+    concatenated copies), the centre index, the returned ``edge_index``
+    and distances in :obj:`dtype` (56 + 4 bytes for float32)."""
+    return float(_GRAPH_TRANSIENT_BYTES
+                 + torch.empty(0, dtype=dtype).element_size())
+
+
+def _sample_size(num_centres: int, per_centre: float, num_samples: int
+                 ) -> int:
+    by_budget = int(_SAMPLE_BUDGET // max(per_centre, 1.0))
+    return int(min(num_centres, max(8, min(num_samples, by_budget))))
+
+
+def _disc_counts(pos: Tensor, eps: float, face: Optional[Tensor],
+                 sample: np.ndarray, cap: int, index=None) -> np.ndarray:
+    """Number of disc members (self included, at most ``cap``) of every
+    sampled centre: fast marching on meshes, a Euclidean ball count on
+    point clouds (the candidates the point-cloud path holds)."""
+    if face is None:
+        from scipy.spatial import cKDTree
+        p = pos.detach().double().cpu().numpy()
+        count = cKDTree(p).query_ball_point(p[sample], eps,
+                                            return_length=True)
+        return np.minimum(np.asarray(count, dtype=np.int64), cap)
+    f = face.t().contiguous().cpu().numpy()
+    if index is None:
+        index = surface_index(pos.detach().double().cpu().numpy(), f)
+    vf_ptr, vf_face, vf_corner, length = index
+    n = pos.size(0)
+    count = np.zeros(sample.size, dtype=np.int64)
+    # The same marching as geodesic_neighbourhoods (slack and relaxation
+    # sweeps matter on obtuse triangles), counting only (no output slots).
+    spacing = float(length.mean())
+    march_many(f, length, vf_ptr, vf_face, vf_corner, n,
+               sample.astype(np.int64), eps + spacing, eps, min(cap, n),
+               1e-6 * spacing, 0, np.empty((sample.size, 0), np.int64),
+               np.empty((sample.size, 0)), count, 8 * get_num_threads())
+    return count
+
+
+def estimate_disc_edges(pos: Tensor, eps: float,
+                        face: Optional[Tensor] = None,
+                        centers: Optional[Tensor] = None,
+                        max_neighbors: Optional[int] = None,
+                        num_samples: int = 64, seed: int = 0) -> int:
+    r"""Estimates the number of edges :math:`E` of the disc graph of
+    :func:`geodesic_neighbourhoods` without building it, from the disc
+    sizes of a random sample :math:`S` of the centres :math:`C`:
+
+    .. math::
+        E \approx \frac{|C|}{|S|} \sum_{i \in S}
+        \min\big(|\mathcal{N}(i)|, K\big),
+
+    where :math:`|\mathcal{N}(i)|` is counted by the same truncated fast
+    marching on meshes (so boundaries, thin parts and uneven vertex density
+    are accounted for, unlike in :math:`\pi \varepsilon^2 N / A`) and by a
+    Euclidean ball count on point clouds (the candidates the point-cloud
+    path holds; a few percent above the arc-corrected count). The sample
+    has :obj:`num_samples` centres, fewer where the discs are so large that
+    marching them would take long (at most about 100,000 vertex visits in
+    all, well under a second; at least 8 centres), and every centre when
+    there are no more. Within 10 % of the real count on spheres, tori,
+    stretched and flattened shapes and point clouds (tested); a 50k-vertex
+    scan of unit area at :math:`\varepsilon = 0.2` (300 million edges) is
+    estimated in under a second.
+
+    Args:
+        pos (torch.Tensor): Points (mesh vertices).
+        eps (float): Disc radius :math:`\varepsilon`.
+        face (torch.Tensor, optional): Triangles in PyG layout.
+            (default: :obj:`None`, a point cloud)
+        centers (torch.Tensor, optional): Indices of the centres.
+            (default: :obj:`None`, every point)
+        max_neighbors (int, optional): The cap :math:`K` per disc.
+            (default: :obj:`None`)
+        num_samples (int, optional): Sampled centres. (default: :obj:`64`)
+        seed (int, optional): Seed of the sample. (default: :obj:`0`)
+
+    Shapes:
+        - **input:** pos :math:`(N, 3)`, face :math:`(3, F)`,
+          centers :math:`(M)`
+        - **output:** an :class:`int`
+    """
+    pos = check_points(pos, min_points=1)
+    eps = check_positive_float(eps, 'eps')
+    num_samples = check_positive_int(num_samples, 'num_samples')
+    n = pos.size(0)
+    cap = n if max_neighbors is None else check_positive_int(max_neighbors,
+                                                            'max_neighbors')
+    centre_idx = (torch.arange(n) if centers is None
+                  else _check_centers(centers, pos))
+    if face is not None:
+        face = _check_mesh(pos, face)
+    return _estimate(pos, eps, face, centre_idx, cap, num_samples, seed)
+
+
+def _estimate(pos, eps, face, centre_idx, cap, num_samples=64, seed=0,
+              index=None) -> int:
+    centre_idx = centre_idx.cpu().numpy()
+    m = centre_idx.size
+    if m == 0:
+        return 0
+    n = pos.size(0)
+    if face is not None:
+        area = float(face_areas(pos.detach().double().cpu(),
+                                face.cpu()).sum())
+        guess = min(n, math.pi * eps * eps * n / max(area, 1e-300))
+    else:
+        guess = float(num_samples)  # ball counts do not march
+    size = _sample_size(m, min(guess, cap), num_samples)
+    rng = np.random.default_rng(seed)
+    sample = centre_idx if size >= m else \
+        centre_idx[rng.choice(m, size=size, replace=False)]
+    count = _disc_counts(pos, eps, face, sample, cap, index)
+    return int(round(float(count.mean()) * m))
+
+
+def _gib(num_bytes: float) -> str:
+    if num_bytes >= 2 ** 30:
+        return f"{num_bytes / 2 ** 30:.3g} GiB"
+    return f"{num_bytes / 2 ** 20:.3g} MiB"
+
+
+def check_disc_memory(num_edges: int, bytes_per_edge: float,
+                      max_memory: Optional[float], eps: float,
+                      num_points: int, num_centres: int,
+                      what: str = 'the disc graph'):
+    r"""Raises a :class:`ValueError` if ``num_edges * bytes_per_edge``
+    exceeds :obj:`max_memory` (and warns above
+    :data:`DISC_MEMORY_WARN_FRACTION` of it), naming the expected edges and
+    memory and what would fit: a smaller radius, fewer vertices (with
+    :class:`~tg_intrinsic.transforms.Decimate` or
+    :class:`~tg_intrinsic.transforms.FarthestPointResample`), or a cap on
+    the neighbours. The edge count grows like :math:`\varepsilon^2` and
+    like :math:`N^2` (points times neighbours per point), which is what the
+    suggestions use, with a 10 % margin."""
+    if max_memory is None:
+        return
+    memory = float(num_edges) * float(bytes_per_edge)
+    mean = num_edges / max(num_centres, 1)
+    head = (f"{what} of radius {eps:g} would hold about {num_edges:,} edges "
+            f"({mean:,.0f} neighbours per point over {num_centres:,} "
+            f"centres among {num_points:,} points), and the per-edge data "
+            f"kept for them about {_gib(memory)} ({bytes_per_edge:.0f} bytes "
+            f"per edge)")
+    if memory > max_memory:
+        shrink = math.sqrt(max_memory / memory) * 0.9
+        fit_eps = eps * shrink
+        fit_points = max(1, int(num_points * shrink))
+        fit_cap = max(1, int(max_memory / (bytes_per_edge
+                                           * max(num_centres, 1)) * 0.9))
+        raise ValueError(
+            f"{head}, above max_memory={_gib(max_memory)}. Use a smaller "
+            f"radius (about {fit_eps:.3g} fits), or fewer points (about "
+            f"{fit_points:,} fit: add Decimate({fit_points}) or "
+            f"FarthestPointResample({fit_points}) before this step; Harmonic "
+            f"Surface Networks resample scans to 1024 points), or cap every "
+            f"disc with max_neighbors={fit_cap}; or pass a larger max_memory "
+            f"(max_memory=None builds it anyway)")
+    if memory > DISC_MEMORY_WARN_FRACTION * max_memory:
+        warnings.warn(f"{head}; this takes long and uses much memory (the "
+                      f"limit is max_memory={_gib(max_memory)}). Consider "
+                      f"a smaller radius or fewer points (Decimate, "
+                      f"FarthestPointResample)", stacklevel=3)
+
+
+def _guard_disc_size(pos, eps, face, centre_idx, cap, max_memory,
+                     bytes_per_edge, index=None):
+    """The check of :func:`geodesic_neighbourhoods`: skipped where even
+    full discs stay below the warning threshold."""
+    if max_memory is None:
+        return
+    max_memory = check_positive_float(max_memory, 'max_memory')
+    m = centre_idx.numel()
+    bound = float(m) * min(cap, pos.size(0)) * bytes_per_edge
+    if bound <= DISC_MEMORY_WARN_FRACTION * max_memory:
+        return
+    edges = _estimate(pos, eps, face, centre_idx, cap, index=index)
+    check_disc_memory(edges, bytes_per_edge, max_memory, eps, pos.size(0),
+                      m)
+
+
+# ----------------------------------------------------------------------------
 # public API
 # ----------------------------------------------------------------------------
 def geodesic_neighbourhoods(pos: Tensor, eps: float,
                             face: Optional[Tensor] = None,
                             normal: Optional[Tensor] = None,
                             max_neighbors: Optional[int] = None,
-                            centers: Optional[Tensor] = None
+                            centers: Optional[Tensor] = None,
+                            max_memory: Optional[float] = MAX_DISC_MEMORY,
+                            bytes_per_edge: Optional[float] = None
                             ) -> Tuple[Tensor, Tensor]:
     r"""Builds the geodesic disc graph: every pair :math:`(j \to i)` whose
     geodesic distance is below :math:`\varepsilon`, self-loops included,
@@ -287,9 +549,24 @@ def geodesic_neighbourhoods(pos: Tensor, eps: float,
     :math:`d = \|p_j - p_i\| \, a / (2 \sin(a / 2))`; without normals,
     :math:`d` is the Euclidean distance.
 
+    Mesh vertices at the same position (a triangle soup) raise a
+    :class:`ValueError`: the marching could not cross between them; weld
+    them first (:class:`~tg_intrinsic.transforms.CleanMesh`).
+
     Centres whose disc holds no other point keep only their self-loop; if
     that happens to every centre, :math:`\varepsilon` is below the sampling
     spacing and a :class:`ValueError` says so.
+
+    The graph grows like :math:`N^2 \varepsilon^2 / A` (a 50k-vertex scan
+    of unit area at :math:`\varepsilon = 0.2` has about 300 million
+    edges), so before building it the number of edges is estimated
+    (:func:`estimate_disc_edges`, about a second at worst) and multiplied
+    by :obj:`bytes_per_edge`; above :obj:`max_memory` a
+    :class:`ValueError` names the expected edges and memory and what
+    would fit (a smaller radius, fewer points, a cap on the neighbours),
+    and above a quarter of it a warning is issued
+    (:func:`check_disc_memory`). Graphs that stay small even with full
+    discs skip the estimate.
 
     Args:
         pos (torch.Tensor): Points (mesh vertices).
@@ -304,6 +581,13 @@ def geodesic_neighbourhoods(pos: Tensor, eps: float,
             (default: :obj:`None`, no cap)
         centers (torch.Tensor, optional): Indices of the centres to build
             discs for. (default: :obj:`None`, every point)
+        max_memory (float, optional): Most bytes the graph (times
+            :obj:`bytes_per_edge`) may take; :obj:`None` disables the
+            check. (default: :data:`MAX_DISC_MEMORY`, 2 GiB)
+        bytes_per_edge (float, optional): Bytes that the caller keeps per
+            edge, e.g. :func:`hsn_bytes_per_edge` for the whole HSN
+            precomputation. (default: :obj:`None`: what this function holds
+            at its peak, :func:`graph_bytes_per_edge`)
 
     Shapes:
         - **input:** pos :math:`(N, 3)`, face :math:`(3, F)`,
@@ -320,11 +604,19 @@ def geodesic_neighbourhoods(pos: Tensor, eps: float,
         centre_idx = torch.arange(pos.size(0), device=pos.device)
     else:
         centre_idx = _check_centers(centers, pos)
+    if bytes_per_edge is None:
+        bytes_per_edge = graph_bytes_per_edge(pos.dtype)
+    else:
+        bytes_per_edge = check_positive_float(bytes_per_edge,
+                                              'bytes_per_edge')
     if face is not None:
         face = _check_mesh(pos, face)
+        _check_welded(pos)
         p = pos.detach().double().cpu().numpy()
         f = face.t().contiguous().cpu().numpy()
         index = surface_index(p, f)
+        _guard_disc_size(pos, eps, face, centre_idx, cap, max_memory,
+                         bytes_per_edge, index)
         # March one mean edge length past eps, so that the relaxation sweeps
         # can repair distances up to eps; gains far below an edge length
         # (first-order noise on curved meshes) do not trigger more sweeps.
@@ -338,6 +630,8 @@ def geodesic_neighbourhoods(pos: Tensor, eps: float,
     else:
         if normal is not None:
             normal = check_vectors(normal, 'normal', pos.size(0), pos)
+        _guard_disc_size(pos, eps, None, centre_idx, cap, max_memory,
+                         bytes_per_edge)
         j, q = radius(pos, eps, max_num_neighbors=pos.size(0), loop=True,
                       query=pos[centre_idx])
         # Self-loops are added here, so that every centre has one.
@@ -369,7 +663,9 @@ def geodesic_neighbourhoods(pos: Tensor, eps: float,
     if centre_idx.numel() > 0 and edge_index.size(1) == centre_idx.numel():
         raise ValueError(f"eps={eps:g} is smaller than the spacing of the "
                          f"points: every disc holds only its centre; "
-                         f"increase eps (e.g. to a few mean edge lengths)")
+                         f"increase eps (e.g. to a few mean edge lengths), "
+                         f"or use a finer mesh (FarthestPointResample("
+                         f"num_vertices) subdivides a coarse one)")
     return edge_index, dist
 
 

@@ -4,6 +4,8 @@ from .estimate_normals import EstimateNormals
 from .tangent_frames import TangentFrames
 from .mls_operators import MLSOperators
 from .random_rotation import RandomRotation
+from .random_axis_scale import RandomAxisScale
+from .random_translation import RandomTranslation
 from .normalize_area import NormalizeArea
 from .log_map import LogMap
 from .parallel_transport import ParallelTransport
@@ -13,8 +15,13 @@ from .gravo_hierarchy import GravoHierarchy
 from .project_views import ProjectViews
 from .fit_spherical_harmonics import FitSphericalHarmonics
 from .spectral_uncertainty import SpectralUncertainty
+from .clean_mesh import CleanMesh
+from .decimate import Decimate
+from .farthest_point_resample import FarthestPointResample
 
 __all__ = ['EstimateNormals', 'TangentFrames', 'MLSOperators',
-           'RandomRotation', 'NormalizeArea', 'LogMap', 'ParallelTransport',
+           'RandomRotation', 'RandomAxisScale', 'RandomTranslation',
+           'NormalizeArea', 'LogMap', 'ParallelTransport',
            'MultiscaleSupports', 'HarmonicPrecompute', 'GravoHierarchy', 'ProjectViews',
-           'FitSphericalHarmonics', 'SpectralUncertainty']
+           'FitSphericalHarmonics', 'SpectralUncertainty', 'CleanMesh',
+           'Decimate', 'FarthestPointResample']

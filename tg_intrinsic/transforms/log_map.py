@@ -8,7 +8,8 @@ from torch_geometric.transforms import BaseTransform
 from tg_intrinsic.geometry import (geodesic_neighbourhoods, log_map,
                                    tangent_frames, vertex_area_weights,
                                    vertex_normals)
-from tg_intrinsic.geometry.logmap import METHODS
+from tg_intrinsic.geometry.logmap import (MAX_DISC_MEMORY, METHODS,
+                                          hsn_bytes_per_edge)
 
 
 def surface_frames(data: Data) -> torch.Tensor:
@@ -62,6 +63,18 @@ class LogMap(BaseTransform):
             every disc. (default: :obj:`None`)
         transport (bool, optional): Also write ``transport``.
             (default: :obj:`True`)
+        max_memory (float, optional): Most bytes that the per-edge data of
+            the Harmonic Surface Network precomputation may take (the disc
+            graph, log map, transport, harmonic terms with 6 rings and
+            orders 0 and 1, and the coarser level, estimated as :math:`E`
+            times :func:`~tg_intrinsic.geometry.logmap.hsn_bytes_per_edge`,
+            155 bytes in float32). The number of edges :math:`E` is
+            estimated before any heavy work; above the limit a
+            :class:`ValueError` says what would fit (a smaller radius, fewer
+            points with :class:`Decimate` or :class:`FarthestPointResample`,
+            or :obj:`max_neighbors`), above a quarter of it a warning is
+            issued. :obj:`None` disables the check. (default: 2 GiB,
+            :data:`~tg_intrinsic.geometry.logmap.MAX_DISC_MEMORY`)
 
     Shapes:
         - **input:** ``pos`` :math:`(N, 3)` and ``face`` :math:`(3, F)`, or
@@ -71,7 +84,8 @@ class LogMap(BaseTransform):
           ``frame`` :math:`(N, 3, 3)`
     """
     def __init__(self, radius: float, method: str = 'fast',
-                 max_neighbors: Optional[int] = None, transport: bool = True):
+                 max_neighbors: Optional[int] = None, transport: bool = True,
+                 max_memory: Optional[float] = MAX_DISC_MEMORY):
         if method not in METHODS:
             raise ValueError(f"'method' must be one of {METHODS}, got "
                              f"{method!r}")
@@ -79,6 +93,10 @@ class LogMap(BaseTransform):
         self.method = method
         self.max_neighbors = max_neighbors
         self.transport = transport
+        if max_memory is not None and not max_memory > 0:
+            raise ValueError(f"'max_memory' must be a positive number of "
+                             f"bytes or None, got {max_memory!r}")
+        self.max_memory = max_memory
 
     def forward(self, data: Data) -> Data:
         data = data.clone()
@@ -86,7 +104,8 @@ class LogMap(BaseTransform):
         frame = surface_frames(data)
         edge_index, _ = geodesic_neighbourhoods(
             data.pos, self.radius, face=face, normal=frame[:, 2],
-            max_neighbors=self.max_neighbors)
+            max_neighbors=self.max_neighbors, max_memory=self.max_memory,
+            bytes_per_edge=hsn_bytes_per_edge(data.pos.dtype))
         r, theta, phi = log_map(data.pos, edge_index, frame, face,
                                 method=self.method)
         data.edge_index = edge_index
@@ -100,6 +119,8 @@ class LogMap(BaseTransform):
         return data
 
     def __repr__(self) -> str:
+        memory = ('' if self.max_memory == MAX_DISC_MEMORY
+                  else f', max_memory={self.max_memory}')
         return (f'{self.__class__.__name__}(radius={self.radius}, '
                 f'method={self.method!r}, '
-                f'max_neighbors={self.max_neighbors})')
+                f'max_neighbors={self.max_neighbors}{memory})')

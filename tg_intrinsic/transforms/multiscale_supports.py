@@ -7,7 +7,9 @@ from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry import fps, geodesic_neighbourhoods, log_map
-from tg_intrinsic.geometry.logmap import METHODS
+from tg_intrinsic.geometry.logmap import (MAX_DISC_MEMORY, METHODS,
+                                          graph_bytes_per_edge,
+                                          hsn_bytes_per_edge)
 from tg_intrinsic.geometry.voronoi import graph_voronoi
 from tg_intrinsic.transforms.log_map import LogMap, surface_frames
 
@@ -54,10 +56,19 @@ class MultiscaleSupports(BaseTransform):
             :class:`LogMap` has not run. (default: :obj:`None`)
         max_neighbors (int, optional): Cap on every disc.
             (default: :obj:`None`)
+        max_memory (float, optional): Memory limit in bytes of every
+            level's discs, checked before each is built: level 0 as in
+            :class:`LogMap`; level :math:`l` marches from its samples over
+            all the points and keeps the samples among them, so its
+            estimate counts the marched edges
+            (:func:`~tg_intrinsic.geometry.logmap.graph_bytes_per_edge`)
+            plus the kept fraction with their HSN data. :obj:`None`
+            disables the check. (default: 2 GiB)
     """
     def __init__(self, ratios: Sequence[float], radii: Sequence[float],
                  method: str = 'fast', level0_radius: Optional[float] = None,
-                 max_neighbors: Optional[int] = None):
+                 max_neighbors: Optional[int] = None,
+                 max_memory: Optional[float] = MAX_DISC_MEMORY):
         ratios, radii = list(ratios), list(radii)
         if len(ratios) != len(radii) or not ratios:
             raise ValueError("'ratios' and 'radii' must be non-empty and of "
@@ -77,6 +88,10 @@ class MultiscaleSupports(BaseTransform):
         self.method = method
         self.level0_radius = level0_radius
         self.max_neighbors = max_neighbors
+        if max_memory is not None and not max_memory > 0:
+            raise ValueError(f"'max_memory' must be a positive number of "
+                             f"bytes or None, got {max_memory!r}")
+        self.max_memory = max_memory
 
     def forward(self, data: Data) -> IntrinsicData:
         if getattr(data, 'logmap', None) is None:
@@ -84,7 +99,8 @@ class MultiscaleSupports(BaseTransform):
                 raise ValueError("level 0 has no discs: apply LogMap(radius) "
                                  "first or pass level0_radius")
             data = LogMap(self.level0_radius, self.method,
-                          self.max_neighbors)(data)
+                          self.max_neighbors,
+                          max_memory=self.max_memory)(data)
         data = IntrinsicData(**{k: v for k, v in data.to_dict().items()})
         pos, face = data.pos, getattr(data, 'face', None)
         frame = surface_frames(data)
@@ -108,8 +124,12 @@ class MultiscaleSupports(BaseTransform):
                                      method=self.method)
             pool_phi = torch.where(pairs[0] == pairs[1], 0.0, pool_phi)
             # discs among the samples, measured on the whole surface
+            kept = hsn_bytes_per_edge(pos.dtype, coarse_fraction=0.0)
             edge_index, _ = geodesic_neighbourhoods(
-                pos, eps, face=face, normal=frame[:, 2], centers=coarse)
+                pos, eps, face=face, normal=frame[:, 2], centers=coarse,
+                max_memory=self.max_memory,
+                bytes_per_edge=graph_bytes_per_edge(pos.dtype)
+                + kept * coarse.numel() / num)
             local = torch.full((num,), -1, dtype=torch.long,
                                device=pos.device)
             local[coarse] = torch.arange(coarse.numel(), device=pos.device)

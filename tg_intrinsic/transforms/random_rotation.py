@@ -9,14 +9,19 @@ from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
 _AXES = {'x': 0, 'y': 1, 'z': 2}
+AXES = ('x', 'y', 'z', 'xyz')
 _LEVEL = re.compile(r'_[1-9][0-9]*$')
 
 
 def random_rotation_matrix(axis: Optional[str] = None,
                            generator: Optional[torch.Generator] = None,
-                           dtype=torch.float64) -> Tensor:
+                           dtype=torch.float64,
+                           max_angle: float = 180.0) -> Tensor:
     """A rotation drawn uniformly from SO(3) (``axis=None``, from a random
-    unit quaternion) or about one coordinate axis."""
+    unit quaternion), about one coordinate axis (``'x'``, ``'y'``, ``'z'``)
+    by an angle uniform in :math:`[-a, a]` with :math:`a` = ``max_angle``
+    degrees, or about x, then y, then z, each by such an angle
+    (``'xyz'``)."""
     if axis is None:
         q = torch.randn(4, generator=generator, dtype=torch.float64)
         w, x, y, z = (q / q.norm()).tolist()
@@ -26,12 +31,16 @@ def random_rotation_matrix(axis: Optional[str] = None,
             [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
         ], dtype=torch.float64)
         return matrix.to(dtype)
-    angle = float(torch.rand(1, generator=generator, dtype=torch.float64))
-    c, s = math.cos(2 * math.pi * angle), math.sin(2 * math.pi * angle)
-    i = _AXES[axis]
-    j, k = [a for a in range(3) if a != i]
     matrix = torch.eye(3, dtype=torch.float64)
-    matrix[j, j], matrix[j, k], matrix[k, j], matrix[k, k] = c, -s, s, c
+    for name in axis:
+        u = float(torch.rand(1, generator=generator, dtype=torch.float64))
+        angle = math.radians(max_angle) * (2 * u - 1)
+        c, s = math.cos(angle), math.sin(angle)
+        i = _AXES[name]
+        j, k = [a for a in range(3) if a != i]
+        turn = torch.eye(3, dtype=torch.float64)
+        turn[j, j], turn[j, k], turn[k, j], turn[k, k] = c, -s, s, c
+        matrix = turn @ matrix
     return matrix.to(dtype)
 
 
@@ -53,19 +62,27 @@ class RandomRotation(BaseTransform):
 
     Args:
         axis (str, optional): :obj:`'x'`, :obj:`'y'` or :obj:`'z'` to rotate
-            about that axis only; :obj:`None` for all of SO(3).
+            about that axis only, :obj:`'xyz'` to rotate about x, then y,
+            then z (HSN's augmentation); :obj:`None` for all of SO(3).
             (default: :obj:`None`)
+        max_angle (float, optional): The largest angle about an axis, in
+            degrees: every angle is uniform in :math:`[-a, a]`. Not used
+            with :obj:`axis=None`. (default: :obj:`180.0`)
 
     Shapes:
         - **input:** ``pos`` :math:`(N, 3)`, optional ``normal`` / ``norm``
           :math:`(N, 3)`, ``frame`` :math:`(N, 3, 3)`
         - **output:** the same attributes, rotated
     """
-    def __init__(self, axis: Optional[str] = None):
-        if axis is not None and axis not in _AXES:
-            raise ValueError(f"axis must be None, 'x', 'y' or 'z' (got "
-                             f"{axis!r})")
+    def __init__(self, axis: Optional[str] = None, max_angle: float = 180.0):
+        if axis is not None and axis not in AXES:
+            raise ValueError(f"axis must be None, 'x', 'y', 'z' or 'xyz' "
+                             f"(got {axis!r})")
+        if not 0 < max_angle <= 180:
+            raise ValueError(f"max_angle must be in (0, 180] degrees, got "
+                             f"{max_angle}")
         self.axis = axis
+        self.max_angle = float(max_angle)
 
     def forward(self, data: Data) -> Data:
         pos = getattr(data, 'pos', None)
@@ -73,7 +90,8 @@ class RandomRotation(BaseTransform):
             raise ValueError("RandomRotation needs 'data.pos' of shape "
                              "[N, 3]")
         data = data.clone()
-        matrix = random_rotation_matrix(self.axis).to(pos.device, pos.dtype)
+        matrix = random_rotation_matrix(
+            self.axis, max_angle=self.max_angle).to(pos.device, pos.dtype)
         for key, value in data.to_dict().items():
             name = _LEVEL.sub('', key)  # pos_1 -> pos
             if not isinstance(value, Tensor) or value.size(-1) != 3:
@@ -85,4 +103,5 @@ class RandomRotation(BaseTransform):
         return data
 
     def __repr__(self) -> str:
-        return f'{self.__class__.__name__}(axis={self.axis!r})'
+        return (f'{self.__class__.__name__}(axis={self.axis!r}, '
+                f'max_angle={self.max_angle:g})')

@@ -80,7 +80,11 @@ def main():
                     '--num-points', str(args.num_points),
                     '--epochs', str(epochs), '--batch-size', '16',
                     '--eval-every', str(max(1, epochs // 10)), '--quiet',
-                    '--shapes-per-class', '20', '--rotate',
+                    '--shapes-per-class', '20', '--rotate', 'so3',
+                    '--optimizer', 'adam', '--lr', '1e-3', '--lr-min', '1e-5',
+                    '--schedule', 'cosine', '--weight-decay', '1e-4',
+                    '--label-smoothing', '0', '--scale', '0.667', '1.5',
+                    '--no-anisotropic', '--translate', '0',
                     '--conv-channels', *map(str, channels)]
             if not vector:
                 argv.append('--no-vector-stream')

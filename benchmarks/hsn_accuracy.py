@@ -56,8 +56,11 @@ def main():
                     '--num-vertices', '300', '500',
                     '--out', os.path.join(args.runs, f'{task}_M{order}'),
                     '--epochs', str(args.epochs), '--batch-size', '8',
-                    '--lr', '1e-2', '--max-order', str(order),
-                    '--hsn-channels', *map(str, channels), '--rotate',
+                    '--optimizer', 'adam', '--lr', '1e-2', '--lr-min', '1e-4',
+                    '--schedule', 'cosine', '--weight-decay', '1e-4',
+                    '--scale', '1', '1', '--resample-vertices', '0',
+                    '--max-order', str(order),
+                    '--hsn-channels', *map(str, channels), '--rotate', 'so3',
                     '--logmap-method', args.method,
                     '--eval-every', str(max(1, args.epochs // 10)),
                     '--quiet']

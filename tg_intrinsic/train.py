@@ -1,16 +1,24 @@
-"""Train DeltaNet (point clouds sampled from the shapes) or a Harmonic
+"""Train DeltaNet (on points sampled once from each shape) or a Harmonic
 Surface Network (on the mesh vertices) on the synthetic data sets or your
-own.
+own, with the papers' protocols as defaults.
 
 Examples::
 
     python -m tg_intrinsic.train --dataset synthetic_modelnet --epochs 30
-    python -m tg_intrinsic.train --dataset synthetic_shrec --num-points 1024
-    python -m tg_intrinsic.train --dataset mesh_folder --mesh-root ModelNet10
+    python -m tg_intrinsic.train --protocol deltanet-shrec11 \
+        --dataset mesh_folder --mesh-root shrec_16
     python -m tg_intrinsic.train --model hsn --dataset synthetic_shrec \
-        --num-vertices 300 500 --rotate --lr 1e-2
+        --num-vertices 300 500
     python -m tg_intrinsic.train --model hsn --task segmentation \
         --dataset synthetic_shrec
+
+Every option left out takes the value of the protocol (``--protocol``, or
+the model and task's default one, see :mod:`tg_intrinsic.protocols`).
+Inputs are prepared once per shape and cached under ``--root``: DeltaNet's
+points (sampled with a generator seeded per shape, so a checkpoint always
+scores the same) with their operators, HSN's discs, log maps and
+transport. Rotations, uniform scales and translations keep both valid;
+a per-axis scale makes DeltaNet rebuild its operators for every batch.
 
 Writes to ``--out``: ``checkpoint.pt`` (model, optimiser, schedule, history;
 written atomically at every evaluation, so ``--resume`` continues an
@@ -24,82 +32,76 @@ import os
 import time
 from typing import Dict, List, Optional
 
+import numpy as np
 import torch
 import torch.nn.functional as F
+from torch_geometric.data import Data
 from torch_geometric.loader import DataLoader
-from torch_geometric.transforms import (Compose, NormalizeScale, RandomScale,
-                                        SamplePoints)
+from torch_geometric.transforms import Compose, NormalizeScale, RandomScale
 from tqdm import tqdm
 
 from tg_intrinsic.io.figures import save_figure
+from tg_intrinsic.protocols import DEFAULT_PROTOCOL, PROTOCOLS, get_protocol
 from tg_intrinsic.utils import (atomic_torch_save, atomic_write,
                                 atomic_write_json)
 
 DATASETS = ('synthetic_modelnet', 'synthetic_shrec', 'mesh_folder')
 MODELS = ('deltanet', 'hsn')
+TASKS = ('classification', 'segmentation')
+ROTATIONS = ('none', 'so3', 'x', 'y', 'z', 'xyz')
+# The data sets each model and task can train on.
+SUPPORTED = {('deltanet', 'classification'): DATASETS,
+             ('deltanet', 'segmentation'): ('synthetic_shrec', 'mesh_folder'),
+             ('hsn', 'classification'): ('synthetic_shrec', 'mesh_folder'),
+             ('hsn', 'segmentation'): ('synthetic_shrec', 'mesh_folder')}
+DEFAULT_DATASET = {'deltanet': 'synthetic_modelnet',
+                   'hsn': 'synthetic_shrec'}
+# Options whose default is the protocol's value (argparse default None).
+PROTOCOL_OPTIONS = ('task', 'num_points', 'k', 'regularizer',
+                    'conv_channels', 'mlp_depth', 'embedding_size', 'radius',
+                    'rings', 'max_order', 'hsn_channels', 'resample_vertices',
+                    'rotate', 'max_angle', 'scale', 'anisotropic',
+                    'translate', 'optimizer', 'lr', 'weight_decay',
+                    'schedule', 'lr_min', 'milestones', 'gamma', 'epochs',
+                    'batch_size', 'label_smoothing', 'train_per_class')
 
 
-def build_datasets(name: str, root: str, num_points: int,
-                   mesh_root: Optional[str] = None, seed: int = 0,
-                   shapes_per_class: Optional[int] = None):
-    """The train and test splits of a data set as point clouds with normals.
-
-    Meshes (SyntheticSHREC, MeshFolder) are turned into ``num_points``
-    points sampled uniformly from the surface, with face normals (the faces
-    are dropped). ``shapes_per_class`` shrinks the synthetic sets (half for
-    training) for quick runs.
-    """
-    from tg_intrinsic.datasets import (MeshFolder, SyntheticModelNet,
-                                       SyntheticSHREC)
-    sample = Compose([SamplePoints(num_points, include_normals=True),
-                      NormalizeScale()])
-    if name == 'synthetic_modelnet':
-        path = os.path.join(root, 'SyntheticModelNet')
-        kwargs = dict(num_points=num_points, seed=seed)
-        if shapes_per_class is not None:
-            kwargs['num_per_class'] = (max(1, shapes_per_class // 2),
-                                       max(1, shapes_per_class // 2))
-        return (SyntheticModelNet(path, 'train', **kwargs),
-                SyntheticModelNet(path, 'test', **kwargs))
-    if name == 'synthetic_shrec':
-        path = os.path.join(root, 'SyntheticSHREC')
-        kwargs = dict(seed=seed, transform=sample)
-        if shapes_per_class is not None:
-            kwargs.update(num_per_class=shapes_per_class,
-                          num_train_per_class=max(1, shapes_per_class // 2))
-        return (SyntheticSHREC(path, 'train', **kwargs),
-                SyntheticSHREC(path, 'test', **kwargs))
-    if name == 'mesh_folder':
-        if mesh_root is None:
-            raise ValueError("--dataset mesh_folder needs --mesh-root PATH "
-                             "(laid out as PATH/<class>/<split>/*.off)")
-        return (MeshFolder(mesh_root, 'train', transform=sample),
-                MeshFolder(mesh_root, 'test', transform=sample))
-    raise ValueError(f"unknown dataset {name!r}; choose one of {DATASETS}")
+def resolve_protocol(args) -> None:
+    """Fills every option left unset from the protocol (``args.protocol``,
+    or the default one of ``args.model`` and ``args.task``); the model
+    defaults to the protocol's."""
+    if args.model is None:
+        args.model = 'deltanet' if args.protocol is None else \
+            get_protocol(args.protocol).model
+    if args.protocol is None:
+        args.protocol = DEFAULT_PROTOCOL[(args.model,
+                                          args.task or 'classification')]
+    protocol = get_protocol(args.protocol)
+    if protocol.model != args.model:
+        raise ValueError(f"protocol {protocol.name!r} trains "
+                         f"{protocol.model}, not {args.model}")
+    for name in PROTOCOL_OPTIONS:
+        if getattr(args, name, None) is None:
+            value = getattr(protocol, name)
+            setattr(args, name, list(value) if isinstance(value, tuple)
+                    else value)
+    if args.rotate is None:
+        args.rotate = 'none'
 
 
-def hsn_pipeline(radius: float = 0.2, rings: int = 6, max_order: int = 1,
-                 method: str = 'fast'):
-    """The precomputation Harmonic Surface Networks train on, shared by
-    ``train`` and ``tg-intrinsic precompute hsn``: mesh -> unit area,
-    frames, geodesic discs of :obj:`radius` with log map and transport on
-    two levels (a quarter of the points and twice the radius on level 1),
-    circular-harmonic terms with :obj:`rings` rings up to order
-    :obj:`max_order`; :obj:`method` is the log map method (``'fast'`` or
-    ``'vector_heat'``). The paper's setting: radius 0.2 on unit area."""
-    from tg_intrinsic.transforms import (HarmonicPrecompute, LogMap,
-                                         MultiscaleSupports, NormalizeArea)
-    # LogMap writes the transport angles too (same solve).
-    return Compose([NormalizeArea(),
-                    LogMap(radius, method=method),
-                    MultiscaleSupports([0.25], [2 * radius], method=method),
-                    HarmonicPrecompute(rings, max_order)])
-
-
-def mesh_splits(args):
-    """The train and test meshes of ``args.dataset`` as they are, before
-    any HSN precomputation."""
-    from tg_intrinsic.datasets import MeshFolder, SyntheticSHREC
+def source_splits(args):
+    """The train and test splits of ``args.dataset`` as stored (meshes or
+    point clouds), before any preparation."""
+    from tg_intrinsic.datasets import (SyntheticModelNet, SyntheticSHREC,
+                                       open_folder)
+    if args.dataset == 'synthetic_modelnet':
+        kwargs = dict(num_points=args.num_points, seed=args.data_seed)
+        if args.shapes_per_class is not None:
+            half = max(1, args.shapes_per_class // 2)
+            kwargs['num_per_class'] = (half, half)
+        path = os.path.join(args.root, 'SyntheticModelNet')
+        return [SyntheticModelNet(path, split, **kwargs)
+                for split in ('train', 'test')]
     if args.dataset == 'synthetic_shrec':
         kwargs = dict(seed=args.data_seed, task=args.task)
         if args.num_vertices is not None:
@@ -109,55 +111,197 @@ def mesh_splits(args):
                           num_train_per_class=max(
                               1, args.shapes_per_class // 2))
         path = os.path.join(args.root, 'SyntheticSHREC')
-        sets = [SyntheticSHREC(path, split, **kwargs)
+        return [SyntheticSHREC(path, split, **kwargs)
                 for split in ('train', 'test')]
-    elif args.dataset == 'mesh_folder':
-        if args.mesh_root is None:
-            raise ValueError("--dataset mesh_folder needs --mesh-root PATH")
-        sets = [MeshFolder(args.mesh_root, split)
-                for split in ('train', 'test')]
-    else:
-        raise ValueError("--model hsn works on meshes: use --dataset "
-                         "synthetic_shrec or mesh_folder")
-    return sets
+    if args.mesh_root is None:
+        raise ValueError("--dataset mesh_folder needs --mesh-root PATH")
+    return [open_folder(args.mesh_root, split, task=args.task,
+                        force_reload=args.force_reload)
+            for split in ('train', 'test')]
+
+
+def select_per_class(labels: List[int], per_class: int, seed: int
+                     ) -> List[int]:
+    """Indices of :obj:`per_class` items of every class (all of a class
+    with fewer), drawn with a generator seeded by :obj:`seed`, in their
+    original order: the papers' "10 training shapes per class" splits."""
+    labels = np.asarray(labels)
+    rng = np.random.default_rng(seed)
+    keep = []
+    for c in np.unique(labels):
+        members = np.flatnonzero(labels == c)
+        keep.extend(rng.permutation(members)[:per_class].tolist())
+    return sorted(keep)
+
+
+def hsn_pipeline(radius: float = 0.2, rings: int = 6, max_order: int = 1,
+                 method: str = 'fast', resample_vertices: Optional[int] = None):
+    """The precomputation Harmonic Surface Networks train on, shared by
+    ``train`` and ``tg-intrinsic precompute hsn``: optionally
+    :obj:`resample_vertices` vertices by farthest point sampling (the
+    paper's segmentation input), then mesh -> unit area, frames, geodesic
+    discs of :obj:`radius` with log map and transport on two levels (a
+    quarter of the points and twice the radius on level 1),
+    circular-harmonic terms with :obj:`rings` rings up to order
+    :obj:`max_order`; :obj:`method` is the log map method (``'fast'`` or
+    ``'vector_heat'``). The paper's setting: radius 0.2 on unit area."""
+    from tg_intrinsic.transforms import (FarthestPointResample,
+                                         HarmonicPrecompute, LogMap,
+                                         MultiscaleSupports, NormalizeArea)
+    steps = [] if resample_vertices is None else \
+        [FarthestPointResample(resample_vertices)]
+    # LogMap writes the transport angles too (same solve).
+    return Compose(steps + [
+        NormalizeArea(), LogMap(radius, method=method),
+        MultiscaleSupports([0.25], [2 * radius], method=method),
+        HarmonicPrecompute(rings, max_order)])
+
+
+def _cache_path(args, kind: str, sets, settings) -> str:
+    """A cache file under ``root/<kind>_cache`` keyed by the data (its
+    processed files' names, sizes and times) and every setting."""
+    stamps = []
+    for dataset in sets:
+        for path in getattr(dataset, 'processed_paths', []):
+            if os.path.exists(path):
+                info = os.stat(path)
+                stamps.append([path, info.st_size, info.st_mtime_ns])
+    key = json.dumps([args.dataset, args.task, args.mesh_root,
+                      [len(s) for s in sets], stamps, settings], default=str)
+    return os.path.join(args.root, f'{kind}_cache', hashlib.sha1(
+        key.encode()).hexdigest()[:16] + '.pt')
+
+
+def _prepare_all(sets, prepare, cache: str, quiet: bool):
+    if os.path.exists(cache):
+        return torch.load(cache, weights_only=False)
+    out = []
+    for split, dataset in zip(('train', 'test'), sets):
+        out.append([prepare(dataset[i], split, i) for i in tqdm(
+            range(len(dataset)), desc=f'preparing {split}', disable=quiet,
+            leave=False)])
+    os.makedirs(os.path.dirname(cache), exist_ok=True)
+    atomic_torch_save(out, cache)
+    return out
+
+
+def _name_errors(prepare):
+    """Wraps ``prepare(data, split, index)`` so that a failure names the
+    shape (its file when the data set knows it)."""
+    def wrapped(data, split, index):
+        try:
+            return prepare(data, split, index)
+        except ValueError as error:
+            where = getattr(data, 'path', None) or f'{split} shape {index}'
+            raise ValueError(f"{where}: {error}") from error
+    return wrapped
+
+
+def build_point_sets(args):
+    """DeltaNet's train and test examples: :obj:`args.num_points` points
+    per shape with unit normals, in the unit sphere, with the MLS operators
+    (k neighbours, regulariser) attached. Meshes are sampled by
+    :func:`~tg_intrinsic.geometry.sampling.sample_surface` with a generator
+    seeded by (data seed, split, index); per-vertex labels go to each point
+    from its triangle's nearest corner. Point clouds with more points keep
+    their farthest-point subset; without normals they are estimated.
+    Cached under ``root/deltanet_cache``."""
+    from tg_intrinsic.geometry import estimate_normals, fps
+    from tg_intrinsic.geometry.sampling import sample_surface
+    from tg_intrinsic.transforms import MLSOperators
+    sets = source_splits(args)
+    operators = MLSOperators(args.k, args.regularizer)
+    normalize = NormalizeScale()
+
+    def prepare(data, split, index):
+        seed = [args.data_seed, ('train', 'test').index(split), index]
+        generator = torch.Generator().manual_seed(int(
+            np.random.SeedSequence(seed).generate_state(1)[0]))
+        out = Data(y=data.y)
+        if getattr(data, 'face', None) is not None:
+            pos, normal, chosen, bary = sample_surface(
+                data.pos.double(), data.face, args.num_points,
+                generator=generator)
+            if args.task == 'segmentation':
+                corner = data.face[bary.argmax(1), chosen]
+                out.y = data.y[corner]
+        else:
+            pos = data.pos.double()
+            normal = getattr(data, 'normal', None)
+            if pos.size(0) < args.num_points:
+                raise ValueError(f"has {pos.size(0)} points, fewer than "
+                                 f"--num-points {args.num_points}")
+            if pos.size(0) > args.num_points:
+                keep = fps(pos, args.num_points / pos.size(0),
+                           random_start=False)[:args.num_points]
+                pos = pos[keep]
+                normal = None if normal is None else normal[keep]
+                if args.task == 'segmentation':
+                    out.y = data.y[keep]
+            if normal is None:
+                normal = estimate_normals(pos, k=10)
+        out.pos, out.normal = pos.float(), normal.float()
+        for key in ('category', 'path'):
+            if key in data:
+                out[key] = data[key]
+        return operators(normalize(out))
+
+    cache = _cache_path(args, 'deltanet', sets,
+                        [args.num_points, args.k, args.regularizer,
+                         args.data_seed])
+    train_items, test_items = _prepare_all(sets, _name_errors(prepare),
+                                           cache, args.quiet)
+    return train_items, test_items, sets[0]
 
 
 def build_mesh_datasets(args):
-    """Train and test lists of precomputed meshes for HSN (the vertices are
-    the points). The precomputation is cached under ``root/hsn_cache``,
-    keyed by the data set and every setting it depends on."""
-    sets = mesh_splits(args)
-    num_classes = sets[0].num_classes
-    # The precomputation is deterministic: cache it beside the data.
-    key = json.dumps([args.dataset, args.task, args.mesh_root,
-                      args.num_vertices, args.shapes_per_class,
-                      args.data_seed, args.radius, args.rings,
-                      args.max_order, args.logmap_method,
-                      [len(s) for s in sets]])
-    cache = os.path.join(args.root, 'hsn_cache', hashlib.sha1(
-        key.encode()).hexdigest()[:16] + '.pt')
-    if os.path.exists(cache):
-        train_items, test_items = torch.load(cache, weights_only=False)
-        return train_items, test_items, num_classes
+    """HSN's train and test examples: every mesh precomputed by
+    :func:`hsn_pipeline` (the vertices are the points), cached under
+    ``root/hsn_cache``."""
+    sets = source_splits(args)
     pipeline = hsn_pipeline(args.radius, args.rings, args.max_order,
-                            args.logmap_method)
-    out = []
-    for split, dataset in zip(('train', 'test'), sets):
-        items = [pipeline(dataset[i]) for i in tqdm(
-            range(len(dataset)), desc=f'precomputing {split}',
-            disable=args.quiet, leave=False)]
-        out.append(items)
-    os.makedirs(os.path.dirname(cache), exist_ok=True)
-    atomic_torch_save(out, cache)
-    return out[0], out[1], num_classes
+                            args.logmap_method, args.resample_vertices)
+    cache = _cache_path(args, 'hsn', sets,
+                        [args.num_vertices, args.shapes_per_class,
+                         repr(pipeline)])
+    train_items, test_items = _prepare_all(
+        sets, _name_errors(lambda data, split, index: pipeline(data)),
+        cache, args.quiet)
+    return train_items, test_items, sets[0]
 
 
-def build_model(name: str, num_classes: int, args) -> torch.nn.Module:
+def augmentation(args) -> Optional[Compose]:
+    """The training-time transforms of ``args``: rotation, scale and
+    translation, in that order."""
+    from tg_intrinsic.transforms import (RandomAxisScale, RandomRotation,
+                                         RandomTranslation)
+    steps = []
+    if args.rotate != 'none':
+        steps.append(RandomRotation(None if args.rotate == 'so3'
+                                    else args.rotate, args.max_angle))
+    if args.scale is not None:
+        steps.append(RandomAxisScale(tuple(args.scale)) if args.anisotropic
+                     else RandomScale(tuple(args.scale)))
+    if args.translate > 0:
+        steps.append(RandomTranslation(args.translate))
+    return Compose(steps) if steps else None
+
+
+def build_model(name: str, num_classes: int, args,
+                num_categories: Optional[int] = None) -> torch.nn.Module:
+    """The network of ``args``; DeltaNet segmentation embeds the object
+    category when the data have :obj:`num_categories` (ShapeNet-Part)."""
     if name == 'deltanet':
-        from tg_intrinsic.nn.models import DeltaNetClassification
-        return DeltaNetClassification(
-            3, num_classes, conv_channels=args.conv_channels, k=args.k,
-            vector_stream=not args.no_vector_stream)
+        from tg_intrinsic.nn.models import (DeltaNetClassification,
+                                            DeltaNetSegmentation)
+        kwargs = dict(conv_channels=args.conv_channels, depth=args.mlp_depth,
+                      k=args.k, regularizer=args.regularizer,
+                      embedding_size=args.embedding_size,
+                      vector_stream=not args.no_vector_stream)
+        if args.task == 'classification':
+            return DeltaNetClassification(3, num_classes, **kwargs)
+        return DeltaNetSegmentation(3, num_classes,
+                                    num_categories=num_categories, **kwargs)
     if name == 'hsn':
         from tg_intrinsic.nn.models import (HSNClassification,
                                             HSNSegmentation)
@@ -168,20 +312,54 @@ def build_model(name: str, num_classes: int, args) -> torch.nn.Module:
     raise ValueError(f"unknown model {name!r}; choose one of {MODELS}")
 
 
+def instance_miou(pred: torch.Tensor, y: torch.Tensor,
+                  parts: torch.Tensor) -> float:
+    r"""Mean intersection over union of one shape's parts, as ShapeNet-Part
+    is scored: over the parts :obj:`parts` (a boolean mask over labels) of
+    its category, a part absent from both prediction and truth counting
+    as 1,
+
+    .. math::
+        \mathrm{mIoU} = \frac{1}{|P|} \sum_{p \in P}
+        \frac{|\{\hat y = p\} \cap \{y = p\}|}
+        {|\{\hat y = p\} \cup \{y = p\}|} .
+    """
+    labels = parts.nonzero().flatten()
+    hit = pred.view(-1, 1) == labels.view(1, -1)
+    true = y.view(-1, 1) == labels.view(1, -1)
+    inter = (hit & true).sum(0).double()
+    union = (hit | true).sum(0).double()
+    iou = torch.where(union > 0, inter / union.clamp_min(1),
+                      torch.ones_like(union))
+    return float(iou.mean())
+
+
 @torch.no_grad()
-def evaluate(model, loader, device) -> float:
+def evaluate(model, loader, device, part_mask=None) -> Dict:
+    """Accuracy over shapes (classification) or points (segmentation); with
+    a category-to-parts :obj:`part_mask` also the instance-averaged mIoU."""
     model.eval()
     correct = total = 0
+    ious = []
     for batch in loader:
         batch = batch.to(device)
         pred = model(batch).argmax(dim=-1)
         correct += int((pred == batch.y.view(-1)).sum())
         total += pred.numel()
-    return correct / max(total, 1)
+        if part_mask is not None:
+            for b in range(batch.num_graphs):
+                at = batch.batch == b
+                ious.append(instance_miou(
+                    pred[at], batch.y[at],
+                    part_mask[int(batch.category[b])].to(device)))
+    out = {'accuracy': correct / max(total, 1)}
+    if ious:
+        out['miou'] = sum(ious) / len(ious)
+    return out
 
 
 CSV_COLUMNS = ('epoch', 'train_loss', 'train_accuracy', 'test_accuracy',
-               'seconds')
+               'test_miou', 'seconds')
 
 
 def write_metrics_csv(history: List[Dict], path: str):
@@ -233,24 +411,19 @@ def train(args) -> Dict:
         torch.set_num_threads(args.threads)
     device = torch.device(args.device if args.device != 'auto' else
                           ('cuda' if torch.cuda.is_available() else 'cpu'))
-    from tg_intrinsic.transforms import RandomRotation
-    if args.model == 'hsn':
-        # Precomputed discs are intrinsic: rotations (which turn the frames
-        # too) keep them valid, a scale would not.
-        train_set, test_set, num_classes = build_mesh_datasets(args)
-        if args.rotate:
-            rotate = RandomRotation()
-            train_set = _Mapped(train_set, rotate)
-    else:
-        train_set, test_set = build_datasets(
-            args.dataset, args.root, args.num_points, args.mesh_root,
-            args.data_seed, args.shapes_per_class)
-        num_classes = train_set.num_classes
-        augment = [train_set.transform, RandomScale((2 / 3, 3 / 2))]
-        if args.rotate:
-            augment.append(RandomRotation())
-        train_set.transform = Compose([t for t in augment if t is not None])
-    model = build_model(args.model, num_classes, args).to(device)
+    build = build_mesh_datasets if args.model == 'hsn' else build_point_sets
+    train_items, test_items, source = build(args)
+    num_classes = source.num_classes
+    part_mask = getattr(source, 'part_mask', None)
+    if args.train_per_class is not None and args.task == 'classification':
+        labels = [int(item.y) for item in train_items]
+        train_items = [train_items[i] for i in select_per_class(
+            labels, args.train_per_class, args.data_seed)]
+    augment = augmentation(args)
+    train_set = train_items if augment is None else \
+        _Mapped(train_items, augment)
+    model = build_model(args.model, num_classes, args, None if part_mask
+                        is None else part_mask.size(0)).to(device)
     if args.optimizer == 'sgd':
         optimizer = torch.optim.SGD(model.parameters(), lr=args.lr,
                                     momentum=0.9,
@@ -258,8 +431,12 @@ def train(args) -> Dict:
     else:
         optimizer = torch.optim.Adam(model.parameters(), lr=args.lr,
                                      weight_decay=args.weight_decay)
-    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(
-        optimizer, T_max=args.epochs, eta_min=args.lr / 100)
+    if args.schedule == 'cosine':
+        schedule = torch.optim.lr_scheduler.CosineAnnealingLR(
+            optimizer, T_max=args.epochs, eta_min=args.lr_min)
+    else:
+        schedule = torch.optim.lr_scheduler.MultiStepLR(
+            optimizer, milestones=args.milestones, gamma=args.gamma)
     os.makedirs(args.out, exist_ok=True)
     checkpoint_path = os.path.join(args.out, 'checkpoint.pt')
     history: List[Dict] = []
@@ -278,11 +455,11 @@ def train(args) -> Dict:
     train_loader = DataLoader(train_set, args.batch_size, shuffle=True,
                               drop_last=len(train_set) > args.batch_size,
                               generator=generator)
-    test_loader = DataLoader(test_set, args.batch_size)
+    test_loader = DataLoader(test_items, args.batch_size)
     num_params = sum(p.numel() for p in model.parameters())
-    print(f"{args.model} ({num_params / 1e6:.2f}M parameters) on "
-          f"{args.dataset}: {len(train_set)} train / {len(test_set)} test, "
-          f"{num_classes} classes, {device}")
+    print(f"{args.model} ({num_params / 1e6:.2f}M parameters), protocol "
+          f"{args.protocol}, on {args.dataset}: {len(train_set)} train / "
+          f"{len(test_items)} test, {num_classes} classes, {device}")
     started = time.perf_counter()
     for epoch in range(start_epoch, args.epochs + 1):
         model.train()
@@ -293,16 +470,17 @@ def train(args) -> Dict:
             batch = batch.to(device)
             optimizer.zero_grad()
             out = model(batch)
-            loss = F.cross_entropy(out, batch.y.view(-1),
+            target = batch.y.view(-1)
+            loss = F.cross_entropy(out, target,
                                    label_smoothing=args.label_smoothing)
             if not torch.isfinite(loss):
                 raise RuntimeError(f"the training loss became {loss.item()} "
                                    f"in epoch {epoch}; lower --lr")
             loss.backward()
             optimizer.step()
-            n = batch.y.numel()
+            n = target.numel()
             loss_sum += float(loss.detach()) * n
-            correct += int((out.argmax(-1) == batch.y.view(-1)).sum())
+            correct += int((out.argmax(-1) == target).sum())
             seen += n
             bar.set_postfix(loss=f'{loss_sum / seen:.3f}')
         schedule.step()
@@ -311,7 +489,10 @@ def train(args) -> Dict:
                   'test_accuracy': None,
                   'seconds': time.perf_counter() - started}
         if epoch % args.eval_every == 0 or epoch == args.epochs:
-            record['test_accuracy'] = evaluate(model, test_loader, device)
+            scores = evaluate(model, test_loader, device, part_mask)
+            record['test_accuracy'] = scores['accuracy']
+            if 'miou' in scores:
+                record['test_miou'] = scores['miou']
         history.append(record)
         write_metrics_csv(history, os.path.join(args.out, 'metrics.csv'))
         if record['test_accuracy'] is not None:
@@ -328,7 +509,11 @@ def train(args) -> Dict:
                          f'{args.model} on {args.dataset}')
     final = history[-1]['test_accuracy'] if history else None
     metrics = {'model': args.model, 'dataset': args.dataset,
-               'parameters': num_params, 'final_test_accuracy': final,
+               'final_test_miou': history[-1].get('test_miou') if history
+               else None,
+               'protocol': args.protocol, 'parameters': num_params,
+               'train_shapes': len(train_set), 'test_shapes': len(test_items),
+               'final_test_accuracy': final,
                'best_test_accuracy': max(
                    (h['test_accuracy'] for h in history
                     if h['test_accuracy'] is not None), default=None),
@@ -353,96 +538,152 @@ class _Mapped(torch.utils.data.Dataset):
 def add_arguments(parser, model_and_dataset: bool = True):
     """The training options, shared by ``python -m tg_intrinsic.train``
     and ``tg-intrinsic train`` (which names the model and data set its own
-    way: ``model_and_dataset=False``)."""
+    way: ``model_and_dataset=False``). Options marked "protocol" default
+    to the protocol's value."""
     if model_and_dataset:
-        parser.add_argument('--model', default='deltanet', choices=MODELS)
-        parser.add_argument('--dataset', default='synthetic_modelnet',
-                            choices=DATASETS)
+        parser.add_argument('--model', default=None, choices=MODELS,
+                            help="default: the protocol's, else deltanet")
+        parser.add_argument('--dataset', default=None, choices=DATASETS,
+                            help='default: synthetic_modelnet for deltanet, '
+                            'synthetic_shrec for hsn')
         parser.add_argument('--mesh-root', default=None,
                             help='root/<class>/<split>/*.off|obj|ply for '
                             'mesh_folder')
-    parser.add_argument('--task', default='classification',
-                        choices=['classification', 'segmentation'],
-                        help='segmentation: per-vertex parts (hsn on '
-                        'synthetic_shrec)')
-    parser.add_argument('--root', default='data',
-                        help='cache folder of the synthetic data sets')
-    parser.add_argument('--out', default=None,
-                        help='output folder (default: runs/<model>_<dataset>)')
-    parser.add_argument('--num-points', type=int, default=1024)
-    parser.add_argument('--shapes-per-class', type=int, default=None,
-                        help='shrink the synthetic sets (quick runs)')
-    parser.add_argument('--epochs', type=int, default=50)
-    parser.add_argument('--batch-size', type=int, default=16)
-    parser.add_argument('--optimizer', default='adam',
-                        choices=['adam', 'sgd'],
-                        help='sgd uses momentum 0.9')
-    parser.add_argument('--lr', type=float, default=1e-3)
-    parser.add_argument('--weight-decay', type=float, default=1e-4)
-    parser.add_argument('--label-smoothing', type=float, default=0.0)
-    parser.add_argument('--eval-every', type=int, default=5)
-    parser.add_argument('--conv-channels', type=int, nargs='+',
-                        default=[64, 64, 128, 256])
-    parser.add_argument('--k', type=int, default=20)
-    parser.add_argument('--rotate', action='store_true',
-                        help='augment training shapes with random rotations '
-                        '(uniform on SO(3)), for data in arbitrary poses')
-    parser.add_argument('--no-vector-stream', action='store_true',
-                        help='ablation: drop the vector stream')
-    parser.add_argument('--hsn-channels', type=int, nargs=2,
-                        default=[16, 32], help='hsn features on levels 0, 1')
-    parser.add_argument('--max-order', type=int, default=1,
-                        help='hsn: highest rotation order (0: one stream)')
-    parser.add_argument('--rings', type=int, default=6)
-    parser.add_argument('--radius', type=float, default=0.2,
-                        help='hsn: disc radius on unit-area meshes')
-    parser.add_argument('--num-vertices', type=int, nargs=2, default=None,
-                        metavar=('LOW', 'HIGH'),
-                        help='hsn on synthetic_shrec: vertex range of the '
-                        'generated meshes (default 500 2000)')
-    parser.add_argument('--logmap-method', default='fast',
-                        choices=['fast', 'vector_heat'])
-    parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument('--data-seed', type=int, default=0)
-    parser.add_argument('--device', default='auto')
-    parser.add_argument('--threads', type=int, default=0)
-    parser.add_argument('--resume', action='store_true')
+    add = parser.add_argument
+    add('--protocol', default=None, choices=list(PROTOCOLS),
+        help='the paper protocol whose values fill every option left out '
+        '(default: deltanet-modelnet40, deltanet-shapenet-part, hsn-shrec11 '
+        'or hsn-human-seg by model and task)')
+    add('--task', default=None, choices=TASKS,
+        help='protocol; segmentation: per-point (DeltaNet) or per-vertex '
+        '(HSN) labels')
+    add('--root', default='data',
+        help='cache folder of the synthetic data sets and prepared inputs')
+    add('--out', default=None,
+        help='output folder (default: runs/<model>_<dataset>)')
+    add('--force-reload', action='store_true',
+        help='re-read the files of a folder data set')
+    add('--num-points', type=int, default=None,
+        help='protocol; DeltaNet: points sampled per shape')
+    add('--shapes-per-class', type=int, default=None,
+        help='shrink the synthetic sets (quick runs)')
+    add('--train-per-class', type=int, default=None,
+        help='protocol; train on this many shapes of every class, drawn '
+        'with --data-seed (classification)')
+    add('--epochs', type=int, default=None, help='protocol')
+    add('--batch-size', type=int, default=None, help='protocol')
+    add('--optimizer', default=None, choices=['adam', 'sgd'],
+        help='protocol; sgd uses momentum 0.9')
+    add('--lr', type=float, default=None, help='protocol')
+    add('--schedule', default=None, choices=['cosine', 'step'],
+        help='protocol; cosine to --lr-min, or step: times --gamma at '
+        'every --milestones epoch')
+    add('--lr-min', type=float, default=None, help='protocol')
+    add('--milestones', type=int, nargs='*', default=None, help='protocol')
+    add('--gamma', type=float, default=None, help='protocol')
+    add('--weight-decay', type=float, default=None, help='protocol')
+    add('--label-smoothing', type=float, default=None, help='protocol')
+    add('--eval-every', type=int, default=5)
+    add('--rotate', default=None, nargs='?', const='so3', choices=ROTATIONS,
+        help='protocol; random rotations: so3 (uniform; the value of a bare '
+        '--rotate), about one axis, or about x, y, z in turn (xyz)')
+    add('--max-angle', type=float, default=None,
+        help='protocol; largest angle about an axis, degrees')
+    add('--scale', type=float, nargs=2, default=None, metavar=('LOW', 'HIGH'),
+        help='protocol; random scale factors (1 1: none)')
+    add('--anisotropic', default=None, action=argparse.BooleanOptionalAction,
+        help='protocol; one scale factor per axis')
+    add('--translate', type=float, default=None,
+        help='protocol; largest random offset of the whole shape')
+    add('--conv-channels', type=int, nargs='+', default=None,
+        help='protocol; DeltaConv widths')
+    add('--mlp-depth', type=int, default=None,
+        help='protocol; DeltaConv MLP depth')
+    add('--embedding-size', type=int, default=None, help='protocol')
+    add('--k', type=int, default=None, help='protocol; DeltaNet neighbours')
+    add('--regularizer', type=float, default=None,
+        help='protocol; DeltaNet MLS regulariser lambda')
+    add('--no-vector-stream', action='store_true',
+        help='ablation: drop the vector stream')
+    add('--hsn-channels', type=int, nargs=2, default=None,
+        help='protocol; hsn features on levels 0, 1')
+    add('--max-order', type=int, default=None,
+        help='protocol; hsn: highest rotation order (0: one stream)')
+    add('--rings', type=int, default=None, help='protocol')
+    add('--radius', type=float, default=None,
+        help='protocol; hsn: disc radius on unit-area meshes')
+    add('--resample-vertices', type=int, default=None,
+        help='protocol; hsn: farthest-point resample meshes to this many '
+        'vertices (0: keep them all)')
+    add('--num-vertices', type=int, nargs=2, default=None,
+        metavar=('LOW', 'HIGH'),
+        help='hsn on synthetic_shrec: vertex range of the generated meshes '
+        '(default 500 2000)')
+    add('--logmap-method', default='fast', choices=['fast', 'vector_heat'])
+    add('--seed', type=int, default=0)
+    add('--data-seed', type=int, default=0,
+        help='seeds the synthetic data, the point sampling and the '
+        'per-class training split')
+    add('--device', default='auto')
+    add('--threads', type=int, default=0)
+    add('--resume', action='store_true')
     if model_and_dataset:
-        parser.add_argument('--quiet', action='store_true',
-                            help='no progress bar')
+        add('--quiet', action='store_true', help='no progress bar')
 
 
 def check_arguments(args, parser):
-    """Fills the default output folder and rejects values no run can use
-    (through ``parser.error``: one line, exit code 2)."""
+    """Fills the protocol's values and the default output folder, and
+    rejects values and combinations no run can use (through
+    ``parser.error``: one line, exit code 2) before any data is read."""
+    try:
+        resolve_protocol(args)
+    except ValueError as error:
+        parser.error(str(error))
+    if args.dataset is None:
+        args.dataset = DEFAULT_DATASET[args.model]
+    supported = SUPPORTED[(args.model, args.task)]
+    if args.dataset not in supported:
+        combos = '; '.join(f"{m} {t}: {', '.join(d)}"
+                           for (m, t), d in SUPPORTED.items())
+        parser.error(f"{args.model} {args.task} cannot train on "
+                     f"{args.dataset}; supported: {combos}")
     if args.out is None:
         args.out = os.path.join('runs', f'{args.model}_{args.dataset}')
     for name in ('num_points', 'epochs', 'batch_size', 'eval_every', 'k',
-                 'rings'):
+                 'rings', 'mlp_depth', 'embedding_size'):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} must be at least 1, "
                          f"got {getattr(args, name)}")
-    for name in ('lr', 'radius'):
+    for name in ('lr', 'radius', 'regularizer', 'gamma', 'max_angle'):
         if not getattr(args, name) > 0:
-            parser.error(f"--{name} must be positive, got "
+            parser.error(f"--{name.replace('_', '-')} must be positive, got "
                          f"{getattr(args, name)}")
-    for name in ('weight_decay', 'label_smoothing', 'max_order', 'threads'):
+    for name in ('weight_decay', 'label_smoothing', 'max_order', 'threads',
+                 'translate', 'lr_min'):
         if getattr(args, name) < 0:
             parser.error(f"--{name.replace('_', '-')} must not be negative, "
                          f"got {getattr(args, name)}")
-    if args.shapes_per_class is not None and args.shapes_per_class < 1:
-        parser.error(f"--shapes-per-class must be at least 1, got "
-                     f"{args.shapes_per_class}")
+    if args.resample_vertices == 0:
+        args.resample_vertices = None
+    for name in ('shapes_per_class', 'train_per_class', 'resample_vertices'):
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            parser.error(f"--{name.replace('_', '-')} must be at least 1, "
+                         f"got {value}")
+    if args.scale is not None and not 0 < args.scale[0] <= args.scale[1]:
+        parser.error(f"--scale needs 0 < LOW <= HIGH, got {args.scale}")
+    if args.scale is not None and list(args.scale) == [1.0, 1.0]:
+        args.scale = None
+    if args.max_angle > 180:
+        parser.error(f"--max-angle must be at most 180, got {args.max_angle}")
     if min(args.conv_channels + args.hsn_channels) < 1:
         parser.error("channel counts must be at least 1")
-    if args.task == 'segmentation' and args.model != 'hsn':
-        parser.error("--task segmentation is available with --model hsn")
     return args
 
 
 def parse_args(argv=None):
     parser = argparse.ArgumentParser(
-        description='Train a tg_intrinsic classification network.')
+        description='Train DeltaNet or a Harmonic Surface Network.')
     add_arguments(parser)
     return check_arguments(parser.parse_args(argv), parser)
 

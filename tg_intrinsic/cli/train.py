@@ -5,16 +5,22 @@ epochs, an atomic checkpoint that --resume continues from, metrics.json,
 metrics.csv (one row per epoch) and learning_curve.png in --out."""
 import os
 
-HELP = 'train DeltaNet or HSN on a synthetic data set or your own folder'
+HELP = ('train DeltaNet or HSN with a paper protocol on a synthetic data set '
+        'or your own folder')
 EXAMPLE = """examples:
-  tg-intrinsic train deltanet --dataset synthetic-modelnet --epochs 30
-  tg-intrinsic train hsn --dataset synthetic-shrec --num-vertices 300 500 \\
-      --rotate --lr 1e-2 --out runs/hsn
-  tg-intrinsic train deltanet --dataset path/to/ModelNet10 --epochs 50
-      # a FOLDER laid out as FOLDER/<class>/<train|test>/*.off|obj|ply
-  tg-intrinsic train hsn --task segmentation --dataset synthetic-shrec
+  tg-intrinsic train hsn --dataset path/to/shrec_16      # HSN's SHREC11 protocol
+  tg-intrinsic train deltanet --protocol deltanet-shrec11 --dataset path/to/shrec_16
+  tg-intrinsic train deltanet --dataset synthetic-modelnet --epochs 30 --lr 0.05
+  tg-intrinsic train hsn --task segmentation --dataset path/to/human_seg
+      # MeshCNN's layout: train/, test/, seg/*.eseg
   tg-intrinsic train deltanet --dataset synthetic-shrec --resume --out runs/x
 
+Every option left out takes the value of the protocol (--protocol, else
+the model and task's default: deltanet-modelnet40, deltanet-shapenet-part,
+hsn-shrec11, hsn-human-seg). FOLDER may be any standard layout:
+<class>/<train|test>/*.off|obj|ply, MeshCNN segmentation, point clouds
+<class>/<train|test>/*.txt|xyz|npy|pts, modelnet40_normal_resampled,
+ShapeNet-Part (normal), ScanObjectNN h5_files.
 Also available as "python -m tg_intrinsic.train --model deltanet ..."."""
 
 SYNTHETIC = {'synthetic-modelnet': 'synthetic_modelnet',
@@ -25,11 +31,12 @@ def add_arguments(parser):
     from tg_intrinsic.train import MODELS, add_arguments as training
     parser.add_argument('model', choices=MODELS,
                         help='deltanet (point clouds) or hsn (meshes)')
-    parser.add_argument('--dataset', default='synthetic-modelnet',
+    parser.add_argument('--dataset', default=None,
                         metavar='{synthetic-modelnet,synthetic-shrec,FOLDER}',
                         help='a generated data set, or a folder of meshes '
                         'laid out as FOLDER/<class>/<train|test>/*.off|obj|ply'
-                        ' (default: synthetic-modelnet)')
+                        ' (default: synthetic-modelnet for deltanet, '
+                        'synthetic-shrec for hsn)')
     training(parser, model_and_dataset=False)
     parser.set_defaults(check=parser)
 
@@ -37,8 +44,10 @@ def add_arguments(parser):
 def run(args):
     from tg_intrinsic.train import check_arguments, train
     from .common import UsageError
-    name = args.dataset.replace('_', '-')
-    if name in SYNTHETIC:
+    name = (args.dataset or '').replace('_', '-')
+    if args.dataset is None:
+        args.mesh_root = None
+    elif name in SYNTHETIC:
         args.dataset, args.mesh_root = SYNTHETIC[name], None
     elif os.path.isdir(args.dataset):
         args.dataset, args.mesh_root = 'mesh_folder', args.dataset

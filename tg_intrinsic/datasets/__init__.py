@@ -13,7 +13,8 @@ r"""Offline, deterministic datasets of curved surfaces (no downloads).
 * :class:`ModelNetResampled`, :class:`ShapeNetPartNormal`,
   :class:`ScanObjectNN`: standard point cloud benchmarks read from the
   user's local copy (PointNet++'s ModelNet and ShapeNet-Part releases,
-  ScanObjectNN's HDF5 files); nothing is downloaded.
+  ScanObjectNN's HDF5 files); nothing is downloaded. :func:`open_folder`
+  picks the reader from the files a folder holds.
 * :func:`svbrdf_scene`: a multi-view capture of a sphere or mesh with a
   spatially varying principled BRDF under an environment map, rendered by
   an independent estimator of the reflection integral (ground truth for
@@ -27,6 +28,7 @@ from .point_cloud_folder import PointCloudFolder
 from .modelnet_resampled import ModelNetResampled
 from .shapenet_part_normal import ShapeNetPartNormal
 from .scanobjectnn import ScanObjectNN
+from .folder import open_folder
 from .svbrdf_scene import svbrdf_scene, look_at_cameras
 from .surfaces import bumpy_torus
 
@@ -38,6 +40,7 @@ __all__ = [
     'ModelNetResampled',
     'ShapeNetPartNormal',
     'ScanObjectNN',
+    'open_folder',
     'svbrdf_scene',
     'look_at_cameras',
     'bumpy_torus',

@@ -24,6 +24,19 @@ class _DenseMax(torch.autograd.Function):
         return hit.mul_(share.unsqueeze(1))
 
 
+def dense_max_pool(dense: Tensor) -> Tensor:
+    r"""Maximum over the points of examples laid out densely,
+    :math:`\mathbf{r}_b = \max_i \mathbf{x}_{b,i}`, with PyG's gradient
+    (shared evenly among ties). Any strides work (e.g. a permuted
+    channels-first tensor).
+
+    Shapes:
+        - **input:** :math:`(B, n, C)`
+        - **output:** :math:`(B, C)`
+    """
+    return _DenseMax.apply(dense)
+
+
 def global_max_pool(x: Tensor, batch: Optional[Tensor],
                     size: Optional[int] = None) -> Tensor:
     r"""Channel-wise maximum over the points of every example,
@@ -53,7 +66,7 @@ def global_max_pool(x: Tensor, batch: Optional[Tensor],
         - **output:** :math:`(B, C)`
     """
     if batch is None:
-        return _DenseMax.apply(x.unsqueeze(0))
+        return dense_max_pool(x.unsqueeze(0))
     if batch.numel() > 1 and bool((batch[1:] < batch[:-1]).any()):
         return scatter_max_pool(x, batch, size)
     size = int(batch.max()) + 1 if size is None else size
@@ -63,6 +76,6 @@ def global_max_pool(x: Tensor, batch: Optional[Tensor],
     else:
         dense = to_dense_batch(x, batch, fill_value=float('-inf'),
                                batch_size=size)[0]
-    out = _DenseMax.apply(dense)
+    out = dense_max_pool(dense)
     empty = (count == 0).view(-1, *([1] * (x.dim() - 1)))
     return torch.where(empty, torch.zeros_like(out), out)

@@ -1,0 +1,70 @@
+"""Opens a local data folder in whichever standard layout it has."""
+import os
+import os.path as osp
+
+from .mesh_folder import MeshFolder
+from .modelnet_resampled import ModelNetResampled
+from .point_cloud_folder import PointCloudFolder
+from .scanobjectnn import ScanObjectNN
+from .shapenet_part_normal import ShapeNetPartNormal
+
+POINT_EXTENSIONS = ('.txt', '.xyz', '.npy', '.pts')
+LAYOUTS = ('ModelNet40 resampled (modelnet40_shape_names.txt), ShapeNet-Part '
+           '(synsetoffset2category.txt), ScanObjectNN (h5_files/main_split), '
+           'meshes <class>/<train|test>/*.obj|off|ply or MeshCNN '
+           'segmentation <train|test>/*.obj with seg/*.eseg, point clouds '
+           '<class>/<train|test>/*.txt|xyz|npy|pts')
+
+
+def _has_point_files(root: str) -> bool:
+    """Whether the split folders (``<class>/<split>/`` or ``<split>/``)
+    hold point files; other files (a README.txt) do not count."""
+    splits = ('train', 'test')
+    folders = [osp.join(root, s) for s in splits]
+    for name in os.listdir(root):
+        folders += [osp.join(root, name, s) for s in splits]
+    for folder in folders:
+        if osp.isdir(folder) and any(
+                osp.splitext(f)[1].lower() in POINT_EXTENSIONS
+                for f in os.listdir(folder)):
+            return True
+    return False
+
+
+def open_folder(root: str, split: str, task: str = 'classification',
+                force_reload: bool = False, num_points: int = 10000,
+                variant: str = 'PB_T50_RS'):
+    r"""The :obj:`split` of the data set in the local folder :obj:`root`,
+    read by the reader of its layout, recognised by its files:
+
+    * :obj:`modelnet40_shape_names.txt` (or :obj:`modelnet10_*`):
+      :class:`ModelNetResampled` (the first :obj:`num_points` points);
+    * :obj:`synsetoffset2category.txt`: :class:`ShapeNetPartNormal`
+      (training on :obj:`"trainval"`, as the papers do);
+    * :obj:`h5_files/`, :obj:`main_split/` or :obj:`main_split_nobg/`:
+      :class:`ScanObjectNN` (:obj:`variant`);
+    * point files (:obj:`.txt`, :obj:`.xyz`, :obj:`.npy`, :obj:`.pts`):
+      :class:`PointCloudFolder`; otherwise :class:`MeshFolder`.
+
+    Raises:
+        ValueError: if :obj:`root` is not a folder, or from the reader,
+            which names the layout it expected.
+    """
+    root = osp.expanduser(os.fspath(root))
+    if not osp.isdir(root):
+        raise ValueError(f"'{root}' is not a folder; expected one of the "
+                         f"layouts: {LAYOUTS}")
+    names = set(os.listdir(root))
+    if names & {'modelnet40_shape_names.txt', 'modelnet10_shape_names.txt'}:
+        num_classes = 40 if 'modelnet40_shape_names.txt' in names else 10
+        return ModelNetResampled(root, split, num_classes=num_classes,
+                                 num_points=num_points,
+                                 force_reload=force_reload)
+    if 'synsetoffset2category.txt' in names:
+        return ShapeNetPartNormal(root, 'trainval' if split == 'train'
+                                  else split, force_reload=force_reload)
+    if names & {'h5_files', 'main_split', 'main_split_nobg'}:
+        return ScanObjectNN(root, split, variant=variant,
+                            force_reload=force_reload)
+    reader = PointCloudFolder if _has_point_files(root) else MeshFolder
+    return reader(root, split, task=task, force_reload=force_reload)

@@ -60,6 +60,23 @@ SMOKE_TRAIN_PER_CLASS = 2       # of the 3 training shapes per class
 SMOKE_RESAMPLE_VERTICES = 60    # of the ~150 vertices per mesh
 
 
+# Layouts and deviations shared by several rows (one owner each).
+SHREC16_LAYOUT = ("MeshCNN's shrec_16/<class>/{train,test}/T<id>.obj "
+                  "(shrec_16.tar.gz)")
+HUMAN_SEG_LAYOUT = ("MeshCNN's human_seg/{train,test}/*.obj with seg/*.eseg "
+                    "(and sseg/*.seseg) (human_seg.tar.gz)")
+HUMAN_SEG_COPY = ("the paper used HSN's repackaging of Maron et al. "
+                  "(shapeseg.zip, per-vertex labels); this reads MeshCNN's "
+                  "remeshed copy (human_seg, per-edge labels voted to "
+                  "vertices), so the numbers are not directly comparable")
+EUCLIDEAN_FPS = ('points: 8x as many area samples, then Euclidean farthest '
+                 'point sampling (the paper: geodesic farthest point '
+                 'sampling)')
+FAST_LOG_MAPS = ("log maps and transport by tg_intrinsic's 'fast' method "
+                 "(the paper: the Vector Heat Method; pass -- "
+                 "--logmap-method vector_heat for it)")
+
+
 @dataclass(frozen=True)
 class Row:
     """One paper table row: the protocol (a key of

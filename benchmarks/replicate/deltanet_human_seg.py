@@ -38,13 +38,9 @@ from _smoke_data import write_human_seg  # noqa: E402
 
 ROW = _common.Row(
     protocol='deltanet-human-seg', reader='MeshFolder',
-    layout="MeshCNN's human_seg/{train,test}/*.obj with seg/*.eseg (and "
-    "sseg/*.seseg) (human_seg.tar.gz)",
+    layout=_common.HUMAN_SEG_LAYOUT,
     smoke_data=write_human_seg,
-    notes=("the paper used HSN's repackaging of Maron et al. (shapeseg.zip, "
-           "per-vertex labels); this reads MeshCNN's remeshed copy "
-           "(human_seg, per-edge labels voted to vertices), so the numbers "
-           "are not directly comparable",
+    notes=(_common.HUMAN_SEG_COPY,
            'reported at the last epoch (the paper: at the best epoch on 10 % '
            'of the training set held out)'))
 

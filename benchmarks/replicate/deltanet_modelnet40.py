@@ -39,8 +39,7 @@ ROW = _common.Row(
     layout='the ModelNet40 mesh release, ModelNet40/<class>/{train,test}/'
     '<class>_XXXX.off (ModelNet40.zip from modelnet.cs.princeton.edu)',
     smoke_data=write_modelnet40,
-    notes=('points: 8x as many area samples, then Euclidean farthest point '
-           'sampling (the paper: geodesic farthest point sampling)', ))
+    notes=(_common.EUCLIDEAN_FPS, ))
 
 
 def main(argv=None):

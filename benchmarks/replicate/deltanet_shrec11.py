@@ -35,11 +35,9 @@ from _smoke_data import write_shrec16  # noqa: E402
 
 ROW = _common.Row(
     protocol='deltanet-shrec11', reader='MeshFolder',
-    layout="MeshCNN's shrec_16/<class>/{train,test}/T<id>.obj "
-    "(shrec_16.tar.gz)",
+    layout=_common.SHREC16_LAYOUT,
     smoke_data=write_shrec16,
-    notes=('points: 8x as many area samples, then Euclidean farthest point '
-           'sampling (the paper: geodesic farthest point sampling)', ))
+    notes=(_common.EUCLIDEAN_FPS, ))
 
 
 def main(argv=None):

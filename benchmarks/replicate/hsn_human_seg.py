@@ -40,16 +40,10 @@ from _smoke_data import write_human_seg  # noqa: E402
 
 ROW = _common.Row(
     protocol='hsn-human-seg', reader='MeshFolder',
-    layout="MeshCNN's human_seg/{train,test}/*.obj with seg/*.eseg (and "
-    "sseg/*.seseg) (human_seg.tar.gz)",
+    layout=_common.HUMAN_SEG_LAYOUT,
     smoke_data=write_human_seg,
-    notes=("the paper used HSN's repackaging of Maron et al. (shapeseg.zip, "
-           "per-vertex labels); this reads MeshCNN's remeshed copy "
-           "(human_seg, per-edge labels voted to vertices), so the numbers "
-           "are not directly comparable",
-           "log maps and transport by tg_intrinsic's 'fast' method (the "
-           "paper: the Vector Heat Method; pass -- --logmap-method "
-           "vector_heat for it)"))
+    notes=(_common.HUMAN_SEG_COPY,
+           _common.FAST_LOG_MAPS))
 
 
 def main(argv=None):

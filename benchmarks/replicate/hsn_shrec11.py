@@ -35,12 +35,9 @@ from _smoke_data import write_shrec16  # noqa: E402
 
 ROW = _common.Row(
     protocol='hsn-shrec11', reader='MeshFolder',
-    layout="MeshCNN's shrec_16/<class>/{train,test}/T<id>.obj "
-    "(shrec_16.tar.gz)",
+    layout=_common.SHREC16_LAYOUT,
     smoke_data=write_shrec16,
-    notes=("log maps and transport by tg_intrinsic's 'fast' method (the "
-           "paper: the Vector Heat Method; pass -- --logmap-method "
-           "vector_heat for it)", ))
+    notes=(_common.FAST_LOG_MAPS, ))
 
 
 def main(argv=None):

@@ -24,26 +24,43 @@ def _reference(model, data):
     return model.head(pooled)
 
 
+@pytest.mark.parametrize('dtype', [torch.float64, torch.float32])
 @pytest.mark.parametrize('training', [True, False])
-def test_channels_first_embedding_matches_the_mlp(training):
-    # Equal-size batches take the channels-first path; it must give the
-    # MLP's outputs and gradients in training (batch statistics) and
-    # evaluation (running statistics) mode.
+def test_channels_first_embedding_matches_the_mlp(training, dtype):
+    # Equal-size batches take the fused channels-first path; it must give
+    # the MLP's outputs, the gradients of every parameter and the same
+    # running statistics, in training (batch statistics) and evaluation
+    # (running statistics) mode.
     torch.manual_seed(0)
     model = DeltaNetClassification(3, 4, conv_channels=(8, 8), k=6,
-                                   embedding_size=32).double()
+                                   embedding_size=32).to(dtype)
     model.head.eval()   # no dropout, so both paths are comparable
     model.embedding.train(training)
+    norm = model.embedding.norms[0].module
+    with torch.no_grad():   # running statistics away from their defaults
+        norm.running_mean.uniform_(-0.5, 0.5)
+        norm.running_var.uniform_(0.5, 2.0)
+        norm.weight.uniform_(-1.0, 1.0)   # negative scales flip the max
+    start = {k: v.clone() for k, v in norm.state_dict().items()}
     data = _clouds([40, 40, 40])
-    model.embedding.norms[0].module.momentum = 0.0   # stats stay as they are
-    ours = model(data)
-    (grad_ours, ) = torch.autograd.grad(ours.square().sum(),
-                                        model.embedding.lins[0].weight)
-    theirs = _reference(model, data)
-    (grad_theirs, ) = torch.autograd.grad(theirs.square().sum(),
-                                          model.embedding.lins[0].weight)
-    torch.testing.assert_close(ours, theirs)
-    torch.testing.assert_close(grad_ours, grad_theirs)
+    data.pos = data.pos.to(dtype)
+    parameters = list(model.parameters())
+
+    def run(forward):
+        norm.load_state_dict(start)
+        out = forward(model, data)
+        grads = torch.autograd.grad(out.square().sum(), parameters)
+        return out, grads, {k: v.clone() for k, v in
+                            norm.state_dict().items()}
+
+    ours, grads_ours, stats_ours = run(lambda m, d: m(d))
+    theirs, grads_theirs, stats_theirs = run(_reference)
+    tol = {} if dtype == torch.float64 else {'rtol': 1e-4, 'atol': 1e-4}
+    torch.testing.assert_close(ours, theirs, **tol)
+    for a, b in zip(grads_ours, grads_theirs):
+        torch.testing.assert_close(a, b, **tol)
+    for key in stats_theirs:
+        torch.testing.assert_close(stats_ours[key], stats_theirs[key], **tol)
 
 
 def test_unequal_batches_take_the_plain_path():
@@ -52,3 +69,25 @@ def test_unequal_batches_take_the_plain_path():
                                    embedding_size=16).double().eval()
     data = _clouds([30, 45])
     torch.testing.assert_close(model(data), _reference(model, data))
+
+
+def test_fused_embedding_shares_gradient_among_tied_maxima():
+    # Repeated rows give tied maxima; the fused pooling must split their
+    # gradient evenly, as the unfused layers (and PyG's max pool) do.
+    from tg_intrinsic.nn.models._embedding_pool import embed_and_pool
+    from tg_intrinsic.pool import dense_max_pool
+    torch.manual_seed(2)
+    linear = torch.nn.Linear(5, 6, bias=False).double()
+    norm = torch.nn.BatchNorm1d(6).double()
+    with torch.no_grad():   # dyadic values: W x is exact, ties stay ties
+        linear.weight.copy_(torch.randint(-8, 9, (6, 5)) / 8.0)
+    rows = torch.randint(-4, 5, (4, 5)).double()
+    x = rows[torch.tensor([0, 1, 0, 2, 3, 3, 1, 3])].requires_grad_(True)
+    out = embed_and_pool(x, linear, norm, 0.2, 2)
+    (ours, ) = torch.autograd.grad(out.sum(), x)
+    norm.reset_running_stats()
+    a = torch.nn.functional.leaky_relu(norm(linear(x)), 0.2).view(2, 4, 6)
+    ref = torch.cat([dense_max_pool(a), a.mean(dim=1)], dim=1)
+    (theirs, ) = torch.autograd.grad(ref.sum(), x)
+    torch.testing.assert_close(out, ref)
+    torch.testing.assert_close(ours, theirs)

@@ -2,7 +2,7 @@ import pytest
 import torch
 from torch_geometric.nn import global_max_pool as pyg_global_max_pool
 
-from tg_intrinsic.pool import global_max_pool
+from tg_intrinsic.pool import dense_max_pool, global_max_pool
 
 
 def _features(sizes, channels=5, seed=0):
@@ -53,3 +53,36 @@ def test_ties_share_the_gradient_like_pyg():
     (theirs, ) = torch.autograd.grad(pyg_global_max_pool(x, batch).sum(), x)
     torch.testing.assert_close(ours, theirs)
     assert ours[0, 0] == 0.5 and ours[1, 0] == 0.5
+
+
+def _reference_max_gradient(dense, grad):
+    # Independent: the mask formula, ties sharing evenly.
+    hit = (dense == dense.amax(dim=1, keepdim=True)).to(dense.dtype)
+    return hit * (grad / hit.sum(dim=1)).unsqueeze(1)
+
+
+@pytest.mark.parametrize('dtype', [torch.float32, torch.float64])
+def test_dense_max_pool_on_a_permuted_layout_with_ties(dtype):
+    # The layout DeltaNet uses: channels first [C, B * n], seen as (B, n, C).
+    generator = torch.Generator().manual_seed(0)
+    h = torch.randint(0, 4, (6, 3 * 5), generator=generator).to(dtype)
+    h.requires_grad_(True)
+    dense = h.view(6, 3, 5).permute(1, 2, 0)
+    out = dense_max_pool(dense)
+    torch.testing.assert_close(out, dense.amax(dim=1))
+    grad = torch.randn(out.shape, generator=generator, dtype=dtype)
+    (ours, ) = torch.autograd.grad(out, h, grad)
+    expected = _reference_max_gradient(dense.detach(), grad)
+    torch.testing.assert_close(ours.view(6, 3, 5).permute(1, 2, 0), expected)
+
+
+def test_dense_max_pool_propagates_nan_like_torch():
+    dense = torch.tensor([[[1.0, 2.0], [float('nan'), 0.0], [3.0, 1.0]]])
+    out = dense_max_pool(dense)
+    assert torch.isnan(out[0, 0]) and out[0, 1] == 2.0
+    assert torch.isnan(dense.amax(dim=1)[0, 0])
+
+
+def test_dense_max_pool_gradcheck():
+    dense = torch.randn(2, 4, 3, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(dense_max_pool, (dense, ))

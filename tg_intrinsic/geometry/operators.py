@@ -330,17 +330,22 @@ def _neighbor_argmax(x, crow, nbr):  # pragma: no cover (numba)
     one on ties); -1 for points without neighbours."""
     n, c = crow.shape[0] - 1, x.shape[1]
     winner = np.full((n, c), -1, dtype=np.int64)
+    best = np.empty((n, c), dtype=x.dtype)  # one buffer, no per-point copy
     for i in prange(n):
         lo, hi = crow[i], crow[i + 1]
         if hi == lo:
             continue
-        best = x[nbr[lo]].copy()
+        first = nbr[lo]
+        top = best[i]
         win = winner[i]
-        win[:] = nbr[lo]
+        for ch in range(c):
+            top[ch] = x[first, ch]
+            win[ch] = first
         for e in range(lo + 1, hi):
-            row = x[nbr[e]]
-            for ch in range(c):
-                if row[ch] > best[ch]:
-                    best[ch] = row[ch]
-                    win[ch] = nbr[e]
+            j = nbr[e]
+            row = x[j]
+            for ch in range(c):  # branch-free, so that it vectorises
+                better = row[ch] > top[ch]
+                top[ch] = row[ch] if better else top[ch]
+                win[ch] = j if better else win[ch]
     return winner

@@ -1,6 +1,8 @@
 from typing import Optional
 
+import numpy as np
 import torch
+from numba import njit, prange
 from torch import Tensor
 from torch_geometric.nn import global_max_pool as scatter_max_pool
 from torch_geometric.utils import to_dense_batch
@@ -8,20 +10,76 @@ from torch_geometric.utils import to_dense_batch
 
 class _DenseMax(torch.autograd.Function):
     """Maximum over dim 1 whose gradient is split evenly among ties (as
-    PyG's scatter maximum does), computed without index tensors."""
+    PyG's scatter maximum does), computed without index tensors. On the CPU
+    both passes are single numba sweeps over the input (no mask tensor of
+    the input's size), which matters for ``(B, n, C)`` = 16 x 2048 x 1024."""
     @staticmethod
     def forward(ctx, dense: Tensor) -> Tensor:
-        out = dense.amax(dim=1)
+        if dense.device.type == 'cpu' and dense.dim() == 3 and \
+                dense.dtype in (torch.float32, torch.float64):
+            out, ties = _max_and_ties(_numpy(dense))
+            out = torch.from_numpy(out)
+        else:
+            out = dense.amax(dim=1)
+            ties = None
         ctx.save_for_backward(dense, out)
+        ctx.ties = ties
         return out
 
     @staticmethod
     def backward(ctx, grad: Tensor) -> Tensor:
         dense, out = ctx.saved_tensors
+        if ctx.ties is not None:
+            # empty_like keeps the input's strides (e.g. a permuted
+            # channels-first tensor), so no transposing copy happens.
+            result = torch.empty_like(dense)
+            _spread_to_maxima(_numpy(dense), out.numpy(), ctx.ties,
+                              _numpy(grad.contiguous()), _numpy(result))
+            return result
         # Float masks: reductions and products on bool tensors are slower.
         hit = (dense == out.unsqueeze(1)).to(grad.dtype)
         share = grad / hit.sum(dim=1).clamp_min(1)
         return hit.mul_(share.unsqueeze(1))
+
+
+def _numpy(t: Tensor) -> np.ndarray:
+    """A numpy view (same memory, any strides) of a CPU tensor."""
+    return t.detach().numpy()
+
+
+@njit(cache=True, parallel=True)
+def _max_and_ties(dense):  # pragma: no cover (numba)
+    b_size, n, c = dense.shape
+    out = np.empty((b_size, c), dtype=dense.dtype)
+    ties = np.zeros((b_size, c), dtype=np.int64)
+    for task in prange(b_size * c):
+        b, ch = task // c, task % c
+        best = -np.inf
+        count = 0
+        for i in range(n):
+            value = dense[b, i, ch]
+            if value > best:
+                best = value
+                count = 1
+            elif value == best:
+                count += 1
+            elif value != value:  # NaN wins, as in torch.amax
+                best = value
+                break
+        out[b, ch] = best
+        ties[b, ch] = count
+    return out, ties
+
+
+@njit(cache=True, parallel=True)
+def _spread_to_maxima(dense, out, ties, grad, result):  # pragma: no cover
+    b_size, n, c = dense.shape
+    for task in prange(b_size * c):
+        b, ch = task // c, task % c
+        best = out[b, ch]
+        share = grad[b, ch] / max(ties[b, ch], 1)
+        for i in range(n):
+            result[b, i, ch] = share if dense[b, i, ch] == best else 0.0
 
 
 def dense_max_pool(dense: Tensor) -> Tensor:

@@ -9,6 +9,7 @@ from tg_intrinsic.nn.delta_conv import scalar_mlp
 from tg_intrinsic.pool.global_max_pool import (dense_max_pool,
                                                global_max_pool)
 from tg_intrinsic.nn.models._deltanet_base import DeltaNetBase
+from tg_intrinsic.nn.models._embedding_pool import can_fuse, embed_and_pool
 
 
 class DeltaNetClassification(torch.nn.Module):
@@ -101,6 +102,9 @@ class DeltaNetClassification(torch.nn.Module):
         # on [1, C, N] than on [N, C] for 1024 channels, and pooling then
         # reduces contiguous memory. Needs equally many points per example.
         lin, norm = self.embedding.lins[0], self.embedding.norms[0]
+        if can_fuse(x, lin, norm.module):   # CPU: one fused operation
+            return embed_and_pool(x, lin, norm.module,
+                                  self.embedding.act.negative_slope, size)
         h = torch.mm(lin.weight, x.t())                       # [C, N]
         h = norm.module(h.unsqueeze(0)).squeeze(0)
         h = self.embedding.act(h).view(h.size(0), size, count)

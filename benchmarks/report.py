@@ -247,6 +247,44 @@ def mesh_operators(d, _):
             ('normal estimation', 'mesh_operators.py', normals)]
 
 
+@rows_for('normals')
+def normals(d, _):
+    names = {'old': 'previous MST + flux', 'new': 'ours',
+             'open3d': f"Open3D {d['versions'].get('open3d', '')}".strip()}
+    sets = []
+    for name, entry in d['datasets'].items():
+        summary = entry['summary']['methods']
+        rows = entry['rows']
+        scores = ', '.join(
+            f"{names[m]} {pct(summary[m]['mean_agreement'], 1)} / "
+            f"{pct(summary[m]['min_agreement'], 1)}"
+            for m in d['methods'])
+        ours, old = summary['new'], summary['old']
+        sets.append(
+            f"{name} ({len(rows)} clouds of {rows[0]['points']} points): "
+            f"{scores}; ours >= {pct(d['goal'])} on {ours['shapes_at_goal']}"
+            f" of {ours['shapes']} (worst `{ours['worst_shape']}`), "
+            f"{times(ours['median_seconds'] / old['median_seconds'])} the "
+            f"time of the previous method "
+            f"({1e3 * ours['median_seconds']:.0f} ms per cloud)")
+    modelnet = d['datasets'].get('SyntheticModelNet')
+    note = ''
+    contact = (sum(r['contact_fraction'] for r in modelnet['rows'])
+               / len(modelnet['rows'])) if modelnet else 0.0
+    if contact > 0.005:  # older data sets kept faces where parts touch
+        visible = modelnet['summary']['methods']['new']
+        note = (f". SyntheticModelNet keeps hidden contact faces between "
+                f"touching parts (coincident points with opposite true "
+                f"normals); without them ours scores "
+                f"{pct(visible['mean_agreement_visible'], 1)} / "
+                f"{pct(visible['min_agreement_visible'], 1)}")
+    result = (f"share of points whose normal points to the side of the true "
+              f"outward normal, mean / min over shapes, k = {d['k']}, "
+              f"{d['threads']} thread(s): " + '; '.join(sets) + note)
+    return [('oriented normals (visibility + signed-graph relaxation)',
+             'normals.py', result)]
+
+
 FEATURES = {'bbox_sorted': 'bounding box', 'area': 'area',
             'volume': 'volume', 'num_vertices': 'vertex count',
             'covariance_eigenvalues': 'covariance eigenvalues',
@@ -350,6 +388,40 @@ def widths(channels: Sequence[int]) -> str:
 
 def pair(a: str, b: str, suffix: str = '') -> str:
     return f'{a}{suffix} each' if a == b else f'{a} vs {b}{suffix}'
+
+
+def parts(spent: dict) -> str:
+    return (f"loading {seconds(spent['loading'])} s, forward "
+            f"{seconds(spent['forward'])} s, backward + step "
+            f"{seconds(spent['backward_and_step'])} s")
+
+
+@rows_for('training_speed')
+def training_speed(d, _):
+    dn, hsn = d['deltanet'], d['hsn']
+    goal = d['goal_seconds_per_epoch']
+    deltanet = (
+        f"{d['shapes']} shapes x {dn['points']} points, batch "
+        f"{dn['batch_size']}, {d['threads']} thread(s), "
+        f"{d['conditions']}: "
+        f"{seconds(dn['epoch_cached_operators'])} s per epoch (goal "
+        f"< {goal} s; {parts(dn['epoch_parts'])}); operators rebuilt every batch "
+        f"{seconds(dn['epoch_operators_per_batch'])} s, PyG's embedding and "
+        f"pooling layers in place of the fused one "
+        f"{seconds(dn['epoch_pyg_embedding_pool'])} s; preparing a shape "
+        f"once (sampling + operators) {dn['prepare_seconds_per_shape']:.2f}"
+        f" s")
+    harmonic = (
+        f"{d['shapes']} meshes of ~{hsn['mean_vertices']:.0f} vertices, "
+        f"{d['threads']} thread(s): {seconds(hsn['epoch_batch_1'])} s per "
+        f"epoch at the paper's batch 1 ({parts(hsn['epoch_parts'])}), "
+        f"{seconds(hsn['epoch_batch_8'])} s "
+        f"at batch 8 (goal < {goal} s); preparing a mesh once (discs, log "
+        f"maps, transport) {hsn['prepare_seconds_per_shape']:.2f} s")
+    return [(f"DeltaNet training epoch, `{dn['protocol']}`",
+             'training_speed.py', deltanet),
+            (f"HSN training epoch, `{hsn['protocol']}`",
+             'training_speed.py', harmonic)]
 
 
 @rows_for('deltanet_accuracy')

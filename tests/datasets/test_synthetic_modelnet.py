@@ -106,6 +106,32 @@ def test_hidden_samples_are_removed():
     assert not inside_a.any() and not inside_b.any()
 
 
+def test_contact_faces_between_touching_parts_are_removed():
+    # A box standing on another (like a mattress on a bed base): the top
+    # of the lower and the bottom of the upper box coincide where they
+    # touch; both faces are inside the union and must not be sampled, while
+    # the uncovered rest of the lower box's top and flush side faces stay.
+    rng = np.random.default_rng(3)
+    base = shapes.box([0, 0, 0.5], [2.0, 2.0, 1.0])
+    top = shapes.box([0.25, 0, 1.25], [1.0, 1.0, 0.5])
+    flush = shapes.box([-1.5, 0, 0.5], [1.0, 2.0, 1.0])  # side to side
+    pts, nrm, _ = shapes.sample_surface([base, top, flush], 6000, rng)
+    on_contact = (np.abs(pts[:, 2] - 1.0) < 1e-9) \
+        & (np.abs(pts[:, 0] - 0.25) < 0.5) & (np.abs(pts[:, 1]) < 0.5)
+    assert not on_contact.any()
+    on_wall = (np.abs(pts[:, 0] + 1.0) < 1e-9) & (pts[:, 2] < 1.0)
+    assert not on_wall.any()
+    # the rest of the base's top face and the top box's sides remain
+    uncovered = (np.abs(pts[:, 2] - 1.0) < 1e-9) & (pts[:, 0] > 0.8)
+    assert uncovered.sum() > 20 and (nrm[uncovered, 2] > 0.99).all()
+    sides = (np.abs(pts[:, 1] - 0.5) < 1e-9) & (pts[:, 2] > 1.0)
+    assert sides.sum() > 20
+    # no two samples with opposite normals coincide anywhere
+    from scipy.spatial import cKDTree
+    pairs = cKDTree(pts).query_pairs(1e-3, output_type='ndarray')
+    assert ((nrm[pairs[:, 0]] * nrm[pairs[:, 1]]).sum(1) > -0.5).all()
+
+
 def test_dataset_normals_perpendicular_to_local_surface(small):
     """Normals agree with a PCA plane fit of the sampled points."""
     train, _ = small

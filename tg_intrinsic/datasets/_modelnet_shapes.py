@@ -5,8 +5,9 @@ A shape is a list of closed primitive meshes (boxes, cylinders, spheres,
 solids of revolution, tori, hollow tubes), each the image of a unit
 primitive under an affine map ``x -> A x + t``. Surface points are drawn
 area-weighted from all triangles; points that lie inside another primitive
-(hidden by the union) are discarded, so the samples cover the outer surface
-of the union. Every point carries the normal of the triangle it was drawn
+(hidden by the union) or on a face pressed against another primitive
+(touching parts) are discarded, so the samples cover the outer surface of
+the union. Every point carries the normal of the triangle it was drawn
 from. Coordinates: z up, like ModelNet's aligned release.
 """
 import numpy as np
@@ -535,8 +536,15 @@ def shape_mesh(parts):
     return np.concatenate(Vs), np.concatenate(Fs), np.concatenate(ids)
 
 
+#: Step along a face's outward normal (in shape units) of the contact test.
+_CONTACT_STEP = 1e-3
+
+
 def sample_surface(parts, num, rng, max_rounds=20):
-    """``num`` area-weighted samples on the visible surface of the union.
+    """``num`` area-weighted samples on the visible surface of the union:
+    samples inside another part are dropped, and so are samples on a face
+    that lies against another part (where parts touch), whose points would
+    otherwise coincide with the other part's with opposite normals.
 
     Returns points, the unit normals of their triangles and the face
     indices into :func:`shape_mesh`'s triangles.
@@ -555,11 +563,16 @@ def sample_surface(parts, num, rng, max_rounds=20):
         r1 = np.sqrt(rng.random(m))[:, None]
         r2 = rng.random(m)[:, None]
         p = (1 - r1) * a[f] + r1 * (1 - r2) * b[f] + r1 * r2 * c[f]
+        # hidden: inside another part, or on a face pressed against another
+        # part (touching parts: a step off the face along its outward normal
+        # enters the other part), so that no contact faces remain
+        ahead = p + _CONTACT_STEP * normal[f]
         hidden = np.zeros(m, dtype=bool)
         for i, part in enumerate(parts):
             other = pid[f] != i
             if other.any():
-                hidden[other] |= part.inside(p[other])
+                hidden[other] |= part.inside(p[other]) \
+                    | part.inside(ahead[other], eps=0.0)
         keep = ~hidden
         pts.append(p[keep])
         nrm.append(normal[f[keep]])

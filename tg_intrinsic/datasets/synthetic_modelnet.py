@@ -28,7 +28,8 @@ class SyntheticModelNet(GeneratedDataset):
     canonical upright orientation (z up). Points are drawn
     uniformly from the visible surface of the union of the parts
     (area-weighted triangle sampling; samples hidden inside another part
-    are discarded), :obj:`oversample` times :obj:`num_points` of them, and
+    or on a face pressed against another part, where parts touch, are
+    discarded), :obj:`oversample` times :obj:`num_points` of them, and
     thinned to :obj:`num_points` by farthest point sampling, as in the
     usual ModelNet preprocessing. Each point carries the normal of the
     triangle it was drawn from. Every cloud is centred (bounding-box
@@ -91,7 +92,7 @@ class SyntheticModelNet(GeneratedDataset):
 
     classes: Tuple[str, ...] = tuple(shapes.CLASSES)
     #: Bumped whenever the generator changes, to invalidate old caches.
-    version = 1
+    version = 2
 
     def __init__(
         self,

@@ -91,3 +91,14 @@ def test_fused_embedding_shares_gradient_among_tied_maxima():
     (theirs, ) = torch.autograd.grad(ref.sum(), x)
     torch.testing.assert_close(out, ref)
     torch.testing.assert_close(ours, theirs)
+
+
+def test_fused_embedding_refuses_a_second_backward():
+    from tg_intrinsic.nn.models._embedding_pool import embed_and_pool
+    linear = torch.nn.Linear(3, 4, bias=False)
+    norm = torch.nn.BatchNorm1d(4)
+    x = torch.randn(6, 3, requires_grad=True)
+    out = embed_and_pool(x, linear, norm, 0.2, 2).sum()
+    out.backward(retain_graph=True)
+    with pytest.raises(RuntimeError, match='differentiated once'):
+        out.backward()

@@ -53,9 +53,16 @@ class _EmbedAndPool(torch.autograd.Function):
     @staticmethod
     @once_differentiable
     def backward(ctx, grad):
+        if ctx.state is None:
+            raise RuntimeError(
+                "the fused DeltaNet embedding overwrites its saved tensor "
+                "in its backward pass, so it can be differentiated once per "
+                "forward; run the forward again instead of "
+                "backward(retain_graph=True) twice")
         x, weight, h = ctx.saved_tensors
         mean, inv_std, scale, shift, maximum, ties, slope, size, \
             training = ctx.state
+        ctx.state = None
         hn = h.numpy()
         c = hn.shape[0]
         g = grad.double().numpy()

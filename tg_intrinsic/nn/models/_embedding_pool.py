@@ -129,6 +129,22 @@ def _channel_moments(h):  # pragma: no cover (numba)
     return mean, var
 
 
+@njit(inline='always')
+def _leaky_factor(z, slope):  # pragma: no cover (numba)
+    """a = z * factor: branch-free (random signs mispredict), and one
+    formula for the forward and backward sweeps, so tied maxima compare
+    equal in both."""
+    return slope + (1.0 - slope) * (z > 0.0)
+
+
+@njit(inline='always')
+def _grad_z(z, top, spread, share, slope):  # pragma: no cover (numba)
+    """dL/dz of one entry: its share of the mean, plus its share of the
+    maximum where it attains it."""
+    factor = _leaky_factor(z, slope)
+    return (spread + share * (z * factor == top)) * factor
+
+
 @njit(cache=True, parallel=True)
 def _pool(h, scale, shift, slope, size):  # pragma: no cover (numba)
     c, n = h.shape
@@ -143,7 +159,7 @@ def _pool(h, scale, shift, slope, size):  # pragma: no cover (numba)
         total = 0.0
         for i in range(b * per, (b + 1) * per):
             z = scale[ch] * h[ch, i] + shift[ch]
-            a = z * (slope + (1.0 - slope) * (z > 0.0))  # as in backward
+            a = z * _leaky_factor(z, slope)
             total += a
             if a > top:
                 top = a
@@ -163,7 +179,6 @@ def _bn_sums(h, mean, inv_std, scale, shift, maximum, ties, g_max, g_mean,
     per = n // size
     sum_dz = np.zeros(c)
     sum_dz_hat = np.zeros(c)
-    rise = 1.0 - slope   # branch-free leaky ReLU: a = z (slope + rise [z>0])
     for ch in prange(c):
         s0 = 0.0
         s1 = 0.0
@@ -173,9 +188,8 @@ def _bn_sums(h, mean, inv_std, scale, shift, maximum, ties, g_max, g_mean,
             top, spread, share = maximum[b, ch], g_mean[b, ch] / per, \
                 g_max[b, ch] / max(ties[b, ch], 1)
             for i in range(b * per, (b + 1) * per):
-                z = a_scale * h[ch, i] + a_shift
-                factor = slope + rise * (z > 0.0)
-                dz = (spread + share * (z * factor == top)) * factor
+                dz = _grad_z(a_scale * h[ch, i] + a_shift, top, spread,
+                             share, slope)
                 s0 += dz
                 s1 += dz * (h[ch, i] - mu)
         sum_dz[ch] = s0
@@ -190,7 +204,6 @@ def _write_grad_h(h, mean, inv_std, scale, shift, maximum, ties, g_max,
     statistics' terms ``centre`` and ``tilt``; both 0 in evaluation)."""
     c, n = h.shape
     per = n // size
-    rise = 1.0 - slope
     for ch in prange(c):
         a_scale, a_shift, mu, inv = scale[ch], shift[ch], mean[ch], \
             inv_std[ch]
@@ -201,7 +214,6 @@ def _write_grad_h(h, mean, inv_std, scale, shift, maximum, ties, g_max,
                 g_max[b, ch] / max(ties[b, ch], 1)
             for i in range(b * per, (b + 1) * per):
                 hv = h[ch, i]
-                z = a_scale * hv + a_shift
-                factor = slope + rise * (z > 0.0)
-                dz = (spread + share * (z * factor == top)) * factor
+                dz = _grad_z(a_scale * hv + a_shift, top, spread, share,
+                             slope)
                 h[ch, i] = a_scale * (dz - offset - slope_hat * hv)

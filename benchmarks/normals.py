@@ -35,6 +35,13 @@ outside). ``agreement_visible`` leaves any such points out (a point with a
 truly opposite normal within 2e-3 of the shape's radius along its normal
 among its 10 nearest neighbours); ``contact_fraction`` says how many.
 
+Where the PCA normal's line is far from the truth (more than 60 degrees),
+its sign says little and no orientation can be trusted: ``pca_over_60``
+counts those points, ``agreement_resolved`` scores the others alone, and
+``one_sided_over_60`` counts the points that stay that far off even for an
+oracle PCA over the neighbours on the same side (chosen with the true
+normals): what is left there is a sampling limit of a 2048-point cloud.
+
     python benchmarks/normals.py [--data ../shared/data] [--root DIR]
         [--open3d PATH] [--quick]
 
@@ -79,7 +86,13 @@ NOTES = ('agreement: fraction of points whose normal has a positive dot '
          'angle to the truth (0-180, sees flips); unsigned_angle_deg: the '
          'same up to sign (PCA accuracy); agreement_visible: agreement '
          'without the points on hidden contact faces (coincident points '
-         'with opposite true normals, see contact_fraction); seconds: best '
+         'with opposite true normals, see contact_fraction); pca_over_60: '
+         'fraction of points whose unoriented PCA normal is more than 60 '
+         'degrees off the true line (there the normal says little about '
+         'the side); one_sided_over_60: the same for an oracle PCA over '
+         'the k nearest neighbours on the same side by the true normals '
+         '(a sampling limit); agreement_resolved: agreement on the points '
+         'whose PCA normal is within 60 degrees; seconds: best '
          'of 3 per cloud, normal estimation included, all methods in the '
          'same process; consistency: max(agreement, 1 - agreement), what '
          'is left if a whole cloud may be flipped (flipped_shapes: clouds '
@@ -232,6 +245,32 @@ def mesh_clouds(data_dir):
     return out, checks
 
 
+def one_sided_pca(pos, normal, pool=30):
+    """Oracle for the unoriented normal: PCA of the point and its K nearest
+    neighbours on the same side of the surface, chosen among its ``pool``
+    nearest by the true normals (dot product above 0.3). What it still gets
+    wrong is a sampling limit, not a neighbour-selection one."""
+    p, n = pos.numpy(), normal.numpy()
+    _, idx = cKDTree(p).query(p, pool + 1)
+    same = (n[idx] * n[:, None]).sum(-1) > 0.3
+    rank = np.where(same, np.arange(pool + 1), pool + 1)
+    chosen = np.take_along_axis(idx, np.argsort(rank, 1)[:, :K + 1], 1)
+    keep = np.take_along_axis(same, np.argsort(rank, 1)[:, :K + 1], 1)
+    patch = p[chosen] * keep[..., None]
+    mean = patch.sum(1) / keep.sum(1, keepdims=True)
+    centred = (p[chosen] - mean[:, None]) * keep[..., None]
+    _, vectors = np.linalg.eigh(np.einsum('nki,nkj->nij', centred, centred))
+    return torch.from_numpy(vectors[:, :, 0])
+
+
+def unsigned_over(normal, truth, degrees=60.0):
+    """Points whose line (sign aside) is more than ``degrees`` off the truth:
+    where a normal says little about the side."""
+    cos = (normal * truth).sum(-1).abs() / normal.norm(dim=-1) \
+        / truth.norm(dim=-1)
+    return cos < np.cos(np.radians(degrees))
+
+
 def contact_mask(pos, normal, tol=2e-3):
     """Points on a hidden contact face: a neighbour with a truly opposite
     normal lies (almost) in the point's own tangent plane."""
@@ -255,7 +294,7 @@ def best_of(fn, pos, repeat=3):
     return min(times), out
 
 
-def score(normal, truth, contact):
+def score(normal, truth, contact, resolved):
     normal = normal.double()
     cos = ((normal * truth).sum(-1) / normal.norm(dim=-1)
            / truth.norm(dim=-1)).clamp(-1, 1)
@@ -263,6 +302,7 @@ def score(normal, truth, contact):
     agreement = float(ok.double().mean())
     return dict(
         agreement=agreement,
+        agreement_resolved=float(ok[resolved].double().mean()),
         consistency=max(agreement, 1.0 - agreement),
         agreement_visible=float(ok[~contact].double().mean()),
         median_angle_deg=float(torch.rad2deg(torch.acos(cos)).median()),
@@ -274,17 +314,22 @@ def run_set(name, clouds, methods, repeat):
     rows = []
     for shape, group, pos, truth in clouds:
         contact = contact_mask(pos, truth)
+        unresolved = unsigned_over(estimate_normals(pos, K, orient=False),
+                                   truth)
         row = dict(dataset=name, shape=shape, group=group,
                    points=pos.size(0),
-                   contact_fraction=float(contact.double().mean()))
+                   contact_fraction=float(contact.double().mean()),
+                   pca_over_60=float(unresolved.double().mean()),
+                   one_sided_over_60=float(unsigned_over(
+                       one_sided_pca(pos, truth), truth).double().mean()))
         for method, fn in methods.items():
             try:
                 seconds, normal = best_of(fn, pos, repeat)
             except RuntimeError as error:  # open3d's qhull on some clouds
                 row[method] = dict(failed=str(error).strip()[:200])
                 continue
-            row[method] = dict(seconds=seconds,
-                               **score(normal, truth, contact))
+            row[method] = dict(seconds=seconds, **score(
+                normal, truth, contact, ~unresolved))
         rows.append(row)
         print(f"{name:9s} {shape:24s} " + '  '.join(
             f"{m} {row[m]['agreement']:.3f} {1e3 * row[m]['seconds']:.0f}ms"
@@ -309,6 +354,8 @@ def summarize(rows, methods):
                 [r[method]['consistency'] for r in rows])),
             flipped_shapes=int((agree < 0.5).sum()),
             mean_agreement_visible=float(visible.mean()),
+            mean_agreement_resolved=float(np.mean(
+                [r[method]['agreement_resolved'] for r in rows])),
             min_agreement_visible=float(visible.min()),
             median_angle_deg=float(np.median(
                 [r[method]['median_angle_deg'] for r in rows])),
@@ -327,9 +374,12 @@ def summarize(rows, methods):
             groups[group][m] = dict(
                 mean_agreement=float(np.mean(agree)) if agree else None,
                 min_agreement=float(np.min(agree)) if agree else None)
-        groups[group]['contact_fraction'] = float(
-            np.mean([r['contact_fraction'] for r in these]))
-    return dict(methods=out, groups=groups)
+        for key in ('contact_fraction', 'pca_over_60', 'one_sided_over_60'):
+            groups[group][key] = float(np.mean([r[key] for r in these]))
+    return dict(methods=out, groups=groups,
+                pca_over_60=float(np.mean([r['pca_over_60'] for r in rows])),
+                one_sided_over_60=float(np.mean(
+                    [r['one_sided_over_60'] for r in rows])))
 
 
 # ---------------------------------------------------------------------------

@@ -266,7 +266,12 @@ def normals(d, _):
             f" of {ours['shapes']} (worst `{ours['worst_shape']}`), "
             f"{times(ours['median_seconds'] / old['median_seconds'])} the "
             f"time of the previous method "
-            f"({1e3 * ours['median_seconds']:.0f} ms per cloud)")
+            f"({1e3 * ours['median_seconds']:.0f} ms per cloud); PCA line "
+            f">60 degrees off the truth on "
+            f"{pct(entry['summary']['pca_over_60'], 1)} of points (oracle "
+            f"one-sided PCA: {pct(entry['summary']['one_sided_over_60'], 1)}"
+            f"), ours {pct(ours['mean_agreement_resolved'], 1)} on the "
+            f"rest")
     modelnet = d['datasets'].get('SyntheticModelNet')
     note = ''
     contact = (sum(r['contact_fraction'] for r in modelnet['rows'])

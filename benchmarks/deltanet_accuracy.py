@@ -26,6 +26,7 @@ import matplotlib
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 
+from tg_intrinsic.datasets import SyntheticModelNet, SyntheticSHREC  # noqa
 from tg_intrinsic.nn.models import DeltaNetClassification  # noqa: E402
 from tg_intrinsic.train import main as train  # noqa: E402
 from tg_intrinsic.utils import atomic_write_json, machine_info  # noqa: E402
@@ -66,6 +67,9 @@ def main():
                'protocol': '10 training shapes per class, xyz input, '
                            'SO(3) rotation + scale augmentation, Adam 1e-3 '
                            'cosine, batch 16',
+               'dataset_versions': {
+                   'synthetic_shrec': SyntheticSHREC.version,
+                   'synthetic_modelnet': SyntheticModelNet.version},
                'runs': []}
     for dataset, epochs, num_classes in (
             ('synthetic_shrec', args.epochs_shrec, 12),

@@ -429,6 +429,20 @@ def training_speed(d, _):
              'training_speed.py', harmonic)]
 
 
+def stale_versions(recorded: Dict[str, int], names: Dict[str, str]) -> str:
+    """The generated data sets whose recorded version is older than the
+    generator's current one, e.g. 'SyntheticModelNet v1, now v2'."""
+    if ROOT not in sys.path:
+        sys.path.insert(0, ROOT)
+    from tg_intrinsic import datasets
+    stale = []
+    for key, version in recorded.items():
+        current = getattr(datasets, names[key]).version
+        if version != current:
+            stale.append(f'{names[key]} v{version}, now v{current}')
+    return ', '.join(stale)
+
+
 @rows_for('deltanet_accuracy')
 def deltanet_accuracy(d, _):
     names = {'synthetic_shrec': 'SyntheticSHREC',
@@ -473,6 +487,10 @@ def deltanet_accuracy(d, _):
     result = (f"{d['protocol']}, {d['num_points']} points, one seed (CPU "
               f"budget): {'; '.join(parts)}. {verdict}; the margins ("
               f"{margin_text}) come from a single seed")
+    stale = stale_versions(d.get('dataset_versions', {}), names)
+    if stale:
+        result += (f". Measured on earlier versions of the generated data "
+                   f"({stale}); not rerun since")
     return [('DeltaNet accuracy, vector stream on vs off (matched '
              'parameters)', 'deltanet_accuracy.py', result)]
 

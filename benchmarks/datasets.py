@@ -26,7 +26,8 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 
 from tg_intrinsic.datasets import SyntheticModelNet, SyntheticSHREC  # noqa
-from tg_intrinsic.datasets._decimate import self_intersections  # noqa: E402
+from tg_intrinsic.datasets.quadric_decimation import (  # noqa: E402
+    self_intersections)
 from tg_intrinsic.geometry import is_closed_manifold  # noqa: E402
 from tg_intrinsic.utils import atomic_write_json, machine_info  # noqa: E402
 

@@ -28,7 +28,8 @@ from torch_geometric.nn import (MLP, EdgeConv, global_max_pool,  # noqa: E402
                                 global_mean_pool)
 
 from tg_intrinsic.geometry import knn  # noqa: E402
-from tg_intrinsic.geometry.mls import build_mls_operators  # noqa: E402
+from tg_intrinsic.geometry.pointcloud.mls import (  # noqa: E402
+    build_mls_operators)
 from tg_intrinsic.nn.models import DeltaNetClassification  # noqa: E402
 from tg_intrinsic.utils import atomic_write_json, machine_info  # noqa: E402
 
@@ -101,8 +102,8 @@ def sphere_accuracy(pcdiff):
     """Max error of the gradient of the coordinate functions on a sphere
     (analytic: the tangential part of e_x, e_y, e_z), both methods."""
     from tg_intrinsic.geometry import tangent_frames
-    from tg_intrinsic.geometry.mls import mls_grad_div
-    from tg_intrinsic.geometry.operators import grad
+    from tg_intrinsic.geometry.pointcloud.mls import mls_grad_div
+    from tg_intrinsic.geometry.pointcloud.operators import grad
     i = np.arange(4000) + 0.5
     phi, theta = np.arccos(1 - 2 * i / 4000), math.pi * (1 + 5 ** 0.5) * i
     p = np.stack([np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi),

@@ -43,12 +43,13 @@ import trimesh
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 
-from tg_intrinsic.datasets._decimate import decimate  # noqa: E402
+from tg_intrinsic.datasets.quadric_decimation import decimate  # noqa: E402
 from tg_intrinsic.geometry import (geodesic_neighbourhoods, log_map,  # noqa
                                    normalize_area, tangent_frames,
                                    vertex_area_weights, vertex_normals)
-from tg_intrinsic.geometry import _vector_heat as vh  # noqa: E402
-from tg_intrinsic.geometry._fmm import march_one, surface_index  # noqa: E402
+from tg_intrinsic.geometry.geodesics import vector_heat as vh  # noqa: E402
+from tg_intrinsic.geometry.geodesics.fast_marching import (  # noqa: E402
+    march_one, surface_index)
 from tg_intrinsic.utils import atomic_write_json, machine_info  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))

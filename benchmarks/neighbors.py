@@ -28,7 +28,8 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), '..'))
-from tg_intrinsic.geometry.neighbors import fps, knn, radius  # noqa: E402
+from tg_intrinsic.geometry.pointcloud.neighbors import (fps, knn,  # noqa: E402
+                                                        radius)
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'results')
 

@@ -73,7 +73,7 @@ from torch_geometric.transforms import SamplePoints  # noqa: E402
 
 from tg_intrinsic.datasets import SyntheticModelNet, SyntheticSHREC  # noqa
 from tg_intrinsic.geometry import estimate_normals  # noqa: E402
-from tg_intrinsic.geometry.neighbors import knn  # noqa: E402
+from tg_intrinsic.geometry.pointcloud.neighbors import knn  # noqa: E402
 from tg_intrinsic.io.mesh import read_mesh  # noqa: E402
 from tg_intrinsic.utils import atomic_write_json, machine_info  # noqa: E402
 

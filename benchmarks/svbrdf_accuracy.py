@@ -2,7 +2,7 @@
 ground truth that does not come from the method's own approximation.
 
 Scene: an icosphere (642 vertices) of spatially varying metals, roughness
-0.2-0.8, rendered by ``tg_intrinsic.geometry.render.render_radiance`` (the
+0.2-0.8, rendered by ``tg_intrinsic.geometry.appearance.lighting.render_radiance`` (the
 full reflection integral: Lambert + GGX with Smith G and Schlick F,
 multiple importance sampled over the environment map), seen by 10, 25, 50
 and 100 cameras, under each HDR map in ``../shared/data/envmaps``
@@ -48,13 +48,14 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), '..'))
 from tg_intrinsic.datasets import svbrdf_scene  # noqa: E402
-from tg_intrinsic.geometry.cameras import look_at_cameras  # noqa
-from tg_intrinsic.geometry.cameras import camera_centers  # noqa: E402
-from tg_intrinsic.geometry.envmap import (downsample_envmap,  # noqa: E402
-                                          sun_sky_envmap)
-from tg_intrinsic.geometry.render import (point_visibility,  # noqa: E402
-                                          render_radiance)
-from tg_intrinsic.geometry.sh import fibonacci_sphere  # noqa: E402
+from tg_intrinsic.geometry.appearance.cameras import look_at_cameras  # noqa
+from tg_intrinsic.geometry.appearance.cameras import (  # noqa: E402
+    camera_centers)
+from tg_intrinsic.geometry.appearance.envmap import (  # noqa: E402
+    downsample_envmap, sun_sky_envmap)
+from tg_intrinsic.geometry.appearance.lighting import render_radiance  # noqa
+from tg_intrinsic.geometry.appearance.raster import point_visibility  # noqa
+from tg_intrinsic.geometry.appearance.sh import fibonacci_sphere  # noqa: E402
 from tg_intrinsic.io import read_envmap  # noqa: E402
 from tg_intrinsic.nn import FrequencySVBRDF  # noqa: E402
 from tg_intrinsic.transforms import (FitSphericalHarmonics,  # noqa: E402

@@ -38,8 +38,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), '..'))
 from tg_intrinsic.datasets import svbrdf_scene  # noqa: E402
-from tg_intrinsic.geometry.envmap import (downsample_envmap,  # noqa: E402
-                                          sun_sky_envmap)
+from tg_intrinsic.geometry.appearance.envmap import (  # noqa: E402
+    downsample_envmap, sun_sky_envmap)
 from tg_intrinsic.io import read_envmap  # noqa: E402
 from tg_intrinsic.nn import FrequencySVBRDF  # noqa: E402
 from tg_intrinsic.transforms import (FitSphericalHarmonics,  # noqa: E402

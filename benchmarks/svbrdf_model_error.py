@@ -33,10 +33,10 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), '..'))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from svbrdf_accuracy import load_envmaps  # noqa: E402
 from tg_intrinsic.datasets import svbrdf_scene  # noqa: E402
-from tg_intrinsic.geometry.brdf import (MIN_ALPHA,  # noqa: E402
+from tg_intrinsic.geometry.appearance.brdf import (MIN_ALPHA,  # noqa: E402
                                         dominant_direction, ggx_albedo)
-from tg_intrinsic.geometry.envmap import (equirect_directions,  # noqa: E402
-                                          equirect_solid_angles)
+from tg_intrinsic.geometry.appearance.envmap import (  # noqa: E402
+    equirect_directions, equirect_solid_angles)
 from tg_intrinsic.nn import FrequencySVBRDF  # noqa: E402
 from tg_intrinsic.transforms import FitSphericalHarmonics  # noqa: E402
 from tg_intrinsic.utils import _atomic, atomic_write_json  # noqa: E402

@@ -26,9 +26,11 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), '..'))
-from tg_intrinsic.geometry.brdf import (lobe_filter, observed_spectra,  # noqa
-                                        spectral_grid, spectral_uncertainty)
-from tg_intrinsic.geometry.sh import fit_sh, real_sh  # noqa: E402
+from tg_intrinsic.geometry.appearance.brdf import (lobe_filter,  # noqa
+                                                   observed_spectra,
+                                                   spectral_grid,
+                                                   spectral_uncertainty)
+from tg_intrinsic.geometry.appearance.sh import fit_sh, real_sh  # noqa: E402
 from tg_intrinsic.utils import (_atomic, atomic_write_json,  # noqa: E402
                                 machine_info)
 

@@ -31,7 +31,7 @@ from torch_geometric.transforms import Compose, RandomScale
 
 from tg_intrinsic.datasets import SyntheticModelNet
 from tg_intrinsic.geometry import SurfaceOperators, build_mls_operators
-from tg_intrinsic.geometry.sh import fibonacci_sphere
+from tg_intrinsic.geometry.appearance.sh import fibonacci_sphere
 from tg_intrinsic.nn.models import DeltaNetClassification
 from tg_intrinsic.transforms import RandomRotation
 

@@ -43,7 +43,7 @@ def sphere_mesh():
 def sky_envmap(height=32, width=64, sun=(0.4, -0.3, 0.866), sun_width=0.08,
                dtype=torch.float64):
     """A small HDR sky: a blue gradient, a dim ground and a Gaussian sun."""
-    from tg_intrinsic.geometry.envmap import equirect_directions
+    from tg_intrinsic.geometry.appearance.envmap import equirect_directions
     d = equirect_directions(height, width, dtype)
     z = d[..., 2:3]
     sky = torch.tensor([0.3, 0.5, 0.9], dtype=dtype) * (0.4 + 0.6 * z.clamp(0))
@@ -61,7 +61,7 @@ def svbrdf_observation_geometry(num_points=200, num_views=40, seed=0,
     """Sphere points with normals, camera directions around them and the
     facing mask: the inputs FitSphericalHarmonics reads, radiance zero."""
     from torch_geometric.data import Data
-    from tg_intrinsic.geometry.sh import fibonacci_sphere
+    from tg_intrinsic.geometry.appearance.sh import fibonacci_sphere
     pos = fibonacci_sphere(num_points, dtype=dtype)
     g = torch.Generator().manual_seed(seed)
     cams = 3 * fibonacci_sphere(num_views, dtype=dtype)

@@ -1,5 +1,5 @@
 """Frequency-domain SVBRDF recovery end to end, on observations from the
-independent renderer (tg_intrinsic.geometry.render: the full reflection
+independent renderer (tg_intrinsic.geometry.appearance.lighting: the full reflection
 integral, not the method's SH approximation).
 
 The scene is a sphere of spatially varying metals (roughness 0.2-0.8) under
@@ -13,7 +13,7 @@ import torch
 from scipy.stats import spearmanr
 
 from tg_intrinsic.datasets import svbrdf_scene
-from tg_intrinsic.geometry.envmap import sun_sky_envmap
+from tg_intrinsic.geometry.appearance.envmap import sun_sky_envmap
 from tg_intrinsic.nn import FrequencySVBRDF
 from tg_intrinsic.transforms import FitSphericalHarmonics, SpectralUncertainty
 

@@ -201,13 +201,13 @@ def build_point_sets(args):
     """DeltaNet's train and test examples: :obj:`args.num_points` points
     per shape with unit normals, in the unit sphere, with the MLS operators
     (k neighbours, regulariser) attached. Meshes are sampled by
-    :func:`~tg_intrinsic.geometry.sampling.sample_surface` with a generator
+    :func:`~tg_intrinsic.geometry.pointcloud.sampling.sample_surface` with a generator
     seeded by (data seed, split, index); per-vertex labels go to each point
     from its triangle's nearest corner. Point clouds with more points keep
     their farthest-point subset; without normals they are estimated.
     Cached under ``root/deltanet_cache``."""
     from tg_intrinsic.geometry import estimate_normals, fps
-    from tg_intrinsic.geometry.sampling import sample_surface
+    from tg_intrinsic.geometry.pointcloud.sampling import sample_surface
     from tg_intrinsic.transforms import MLSOperators
     sets = source_splits(args)
     operators = MLSOperators(args.k, args.regularizer)

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import torch
 
-from tg_intrinsic.geometry.envmap import equirect_lookup
+from tg_intrinsic.geometry.appearance.envmap import equirect_lookup
 
 # Mitsuba's envmap frame has +y up and looks its map up with row
 # coordinate theta / pi * (H - 1); ours has +z up and theta / pi * H - 1/2

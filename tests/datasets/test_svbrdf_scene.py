@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from tg_intrinsic.datasets import look_at_cameras, svbrdf_scene
-from tg_intrinsic.geometry.render import camera_centers
+from tg_intrinsic.geometry.appearance.cameras import camera_centers
 
 MESHES = os.path.join(os.path.dirname(__file__), '..', '..', '..', 'shared',
                       'data', 'meshes')

@@ -8,7 +8,7 @@ from torch_geometric.loader import DataLoader
 
 from tg_intrinsic import IntrinsicData
 from tg_intrinsic.datasets import SyntheticModelNet
-from tg_intrinsic.datasets import _modelnet_shapes as shapes
+from tg_intrinsic.datasets import modelnet_shapes as shapes
 
 SMALL = dict(num_points=512, num_per_class=(3, 2), log=False)
 

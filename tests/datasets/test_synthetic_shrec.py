@@ -9,9 +9,10 @@ from torch_geometric.loader import DataLoader
 
 from tg_intrinsic import IntrinsicData
 from tg_intrinsic.datasets import SyntheticSHREC
-from tg_intrinsic.datasets import _implicit as imp
-from tg_intrinsic.datasets import _shrec_shapes as shapes
-from tg_intrinsic.datasets._decimate import decimate, self_intersections
+from tg_intrinsic.datasets import implicit_surfaces as imp
+from tg_intrinsic.datasets import shrec_shapes as shapes
+from tg_intrinsic.datasets.quadric_decimation import (decimate,
+                                                      self_intersections)
 
 SMALL = dict(num_per_class=3, num_train_per_class=2, log=False)
 

@@ -12,12 +12,12 @@ from scipy.sparse.linalg import spsolve
 
 from tg_intrinsic.geometry import (geodesic_neighbourhoods, log_map,
                                    tangent_frames, vertex_normals)
-from tg_intrinsic.geometry import _vector_heat
-from tg_intrinsic.geometry._affine_heat import (AffineHeatPatch,
+from tg_intrinsic.geometry.geodesics import vector_heat as _vector_heat
+from tg_intrinsic.geometry.geodesics.affine_heat import (AffineHeatPatch,
                                                 MeshTangentData, SparseLU)
 
-from ..conftest import grid_mesh, icosphere
-from .test_logmap import sphere_truth
+from tests.conftest import grid_mesh, icosphere
+from tests.geometry.test_logmap import sphere_truth
 
 
 def wrap(angle):

@@ -1,17 +1,18 @@
 """Frequency-domain reflection and spectral uncertainty
-(tg_intrinsic.geometry.brdf)."""
+(tg_intrinsic.geometry.appearance.brdf)."""
 import math
 
 import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from tg_intrinsic.geometry.brdf import (lobe_filter, observed_spectra,
-                                        reflect,
-                                        sh_reflectance, spectral_uncertainty,
-                                        to_local)
-from tg_intrinsic.geometry.frames import tangent_frames
-from tg_intrinsic.geometry.sh import (fibonacci_sphere, fit_sh,
+from tg_intrinsic.geometry.appearance.brdf import (lobe_filter,
+                                                   observed_spectra, reflect,
+                                                   sh_reflectance,
+                                                   spectral_uncertainty,
+                                                   to_local)
+from tg_intrinsic.geometry.pointcloud.frames import tangent_frames
+from tg_intrinsic.geometry.appearance.sh import (fibonacci_sphere, fit_sh,
                                       principled_to_torrance_sparrow,
                                       real_sh, schlick_fresnel, smith_g1)
 
@@ -191,7 +192,7 @@ def test_large_batch_is_chunked_and_dtype_stable(dtype):
 
 def test_compiled_grid_matches_the_torch_grid(monkeypatch):
     """The CPU kernel and the broadcast path (used on GPUs) agree."""
-    import tg_intrinsic.geometry.brdf as brdf
+    import tg_intrinsic.geometry.appearance.brdf as brdf
     g = torch.Generator().manual_seed(8)
     light = dirac_light(unit(torch.randn(200, 3, generator=g,
                                          dtype=torch.float64))) \
@@ -234,7 +235,7 @@ def _albedo_by_quadrature(theta_o, alpha, r0, n=600):
 def test_split_sum_reflects_uniform_light_exactly():
     """The split-sum model's directional albedo table against an
     independent quadrature, and uniform light reflected with it."""
-    from tg_intrinsic.geometry.brdf import ggx_albedo
+    from tg_intrinsic.geometry.appearance.brdf import ggx_albedo
     cases = [(0.2, 0.1), (0.7, 0.4), (1.2, 0.6), (0.4, 0.85)]
     cos = torch.tensor([[math.cos(t) for t, _ in cases]],
                        dtype=torch.float64)

@@ -3,13 +3,15 @@ import math
 import pytest
 import torch
 
-from tg_intrinsic.geometry.envmap import (downsample_envmap, envmap_to_sh,
-                                          equirect_directions,
-                                          equirect_lookup,
-                                          equirect_solid_angles,
-                                          filter_envmap, irradiance,
-                                          sh_to_envmap, sun_sky_envmap)
-from tg_intrinsic.geometry.sh import (brdf_filter, fibonacci_sphere,
+from tg_intrinsic.geometry.appearance.envmap import (downsample_envmap,
+                                                     envmap_to_sh,
+                                                     equirect_directions,
+                                                     equirect_lookup,
+                                                     equirect_solid_angles,
+                                                     filter_envmap, irradiance,
+                                                     sh_to_envmap,
+                                                     sun_sky_envmap)
+from tg_intrinsic.geometry.appearance.sh import (brdf_filter, fibonacci_sphere,
                                       num_coefficients, real_sh, sh_index)
 
 DEVICES = ['cpu'] + (['cuda'] if torch.cuda.is_available() else [])

@@ -100,8 +100,8 @@ def test_tangent_frames_bad_input():
 
 @pytest.mark.parametrize('shape', ['cloud', 'plane', 'anisotropic'])
 def test_compiled_pca_matches_torch_eigh(shape):
-    from tg_intrinsic.geometry.frames import _pca_numba, _pca_torch
-    from tg_intrinsic.geometry.neighbors import knn
+    from tg_intrinsic.geometry.pointcloud.frames import _pca_numba, _pca_torch
+    from tg_intrinsic.geometry.pointcloud.neighbors import knn
     gen = torch.Generator().manual_seed(0)
     pos = torch.randn(1500, 3, dtype=torch.float64, generator=gen)
     if shape == 'plane':  # far from the origin: tests the centring
@@ -168,7 +168,7 @@ def test_u_prism_is_thin_for_its_sampling():
     # The walls must really be thinner than the neighbourhoods (otherwise
     # the thin-part test below tests nothing): most points have a neighbour
     # on the other side of their wall among their 10 nearest.
-    from tg_intrinsic.geometry.neighbors import knn
+    from tg_intrinsic.geometry.pointcloud.neighbors import knn
     pos, normal = u_prism(2000)
     nb = knn(pos, 10)[0].view(-1, 10)
     opposite = ((normal[nb] * normal[:, None]).sum(-1) < -0.9).any(1)

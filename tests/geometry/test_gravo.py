@@ -10,11 +10,11 @@ import scipy.sparse as sp
 import trimesh
 from scipy.sparse.csgraph import dijkstra
 
-from tg_intrinsic.geometry.gravo import (_closest_on_triangle, _csr,
+from tg_intrinsic.geometry.multigrid.gravo import (_closest_on_triangle, _csr,
                                          _triangles, gravo_hierarchy,
                                          gravo_level)
 
-from ..conftest import grid_mesh
+from tests.conftest import grid_mesh
 
 
 def face_edges(face):

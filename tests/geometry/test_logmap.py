@@ -13,12 +13,13 @@ from hypothesis import strategies as st
 from tg_intrinsic.geometry import (estimate_normals, geodesic_neighbourhoods,
                                    log_map, lumped_mass, tangent_frames,
                                    vertex_area_weights, vertex_normals)
-from tg_intrinsic.geometry import _affine_heat, _vector_heat
+from tg_intrinsic.geometry.geodesics import affine_heat as _affine_heat
+from tg_intrinsic.geometry.geodesics import vector_heat as _vector_heat
 
-from ..conftest import grid_mesh, icosphere
-from .test_bad_input import (SETTINGS, assert_valid, call, face_arrays,
-                             point_arrays)
-from .test_frames import fibonacci_sphere
+from tests.conftest import grid_mesh, icosphere
+from tests.geometry.test_bad_input import (SETTINGS, assert_valid, call,
+                                           face_arrays, point_arrays)
+from tests.geometry.test_frames import fibonacci_sphere
 
 
 needs_pp3d = pytest.mark.skipif(
@@ -193,7 +194,7 @@ def test_fast_on_sphere(dtype):
 
 def test_fast_kernel_matches_torch_reference():
     # The CPU path is a numba kernel; other devices use the torch version.
-    from tg_intrinsic.geometry.logmap import _fast_numba, _fast_torch
+    from tg_intrinsic.geometry.geodesics.logmap import _fast_numba, _fast_torch
     pos, face = bumpy_sphere(2)
     frame = tangent_frames(vertex_normals(pos, face))
     edge_index, _ = geodesic_neighbourhoods(pos, 0.8, face=face)
@@ -610,7 +611,7 @@ def estimate_cases():
 
 @pytest.mark.parametrize('name', list(estimate_cases()))
 def test_estimated_disc_edges_match_the_real_count(name):
-    from tg_intrinsic.geometry.logmap import estimate_disc_edges
+    from tg_intrinsic.geometry.geodesics.logmap import estimate_disc_edges
     (pos, face), eps = estimate_cases()[name]
     real = geodesic_neighbourhoods(pos, eps, face=face)[0].size(1)
     estimate = estimate_disc_edges(pos, eps, face=face)
@@ -629,7 +630,7 @@ def test_estimated_disc_edges_match_the_real_count(name):
 
 
 def test_estimated_disc_edges_on_point_clouds():
-    from tg_intrinsic.geometry.logmap import estimate_disc_edges
+    from tg_intrinsic.geometry.geodesics.logmap import estimate_disc_edges
     pos = fibonacci_sphere(3000)
     for eps in (0.1, 0.4):
         real = geodesic_neighbourhoods(pos, eps, normal=pos)[0].size(1)
@@ -643,7 +644,7 @@ def test_estimated_disc_edges_on_point_clouds():
 
 def test_hsn_bytes_per_edge_matches_the_pipeline_output():
     from torch_geometric.data import Data
-    from tg_intrinsic.geometry.logmap import hsn_bytes_per_edge
+    from tg_intrinsic.geometry.geodesics.logmap import hsn_bytes_per_edge
     from tg_intrinsic.train import hsn_pipeline
     for dtype in (torch.float32, torch.float64):
         pos, face = icosphere(3, dtype=dtype)
@@ -663,7 +664,7 @@ def test_hsn_bytes_per_edge_matches_the_pipeline_output():
 @pytest.mark.filterwarnings('ignore:the disc graph')
 def test_disc_size_check_raises_before_marching(monkeypatch):
     import re
-    from tg_intrinsic.geometry import logmap as L
+    from tg_intrinsic.geometry.geodesics import logmap as L
     pos, face = unit_area(*icosphere(3))
 
     def no_marching(*args, **kwargs):
@@ -698,7 +699,7 @@ def test_disc_size_check_raises_before_marching(monkeypatch):
 
 def test_disc_size_check_warns_below_the_limit_and_skips_small_graphs(
         monkeypatch):
-    from tg_intrinsic.geometry import logmap as L
+    from tg_intrinsic.geometry.geodesics import logmap as L
     pos, face = unit_area(*icosphere(3))
     real = geodesic_neighbourhoods(pos, 0.2, face=face)[0].size(1)
     # 60 bytes per edge, limit at twice the graph: above a quarter, warns.

@@ -4,9 +4,9 @@ import pytest
 import torch
 
 from tg_intrinsic.geometry import knn, tangent_frames
-from tg_intrinsic.geometry import operators as ops
-from tg_intrinsic.geometry.mls import mls_grad_div
-from tg_intrinsic.geometry.operators import SurfaceOperators
+from tg_intrinsic.geometry.pointcloud import operators as ops
+from tg_intrinsic.geometry.pointcloud.mls import mls_grad_div
+from tg_intrinsic.geometry.pointcloud.operators import SurfaceOperators
 from tests.geometry.test_frames import fibonacci_sphere
 
 

@@ -9,8 +9,8 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tg_intrinsic.geometry import neighbors as nb
-from tg_intrinsic.geometry.neighbors import fps, knn, radius
+from tg_intrinsic.geometry.pointcloud import neighbors as nb
+from tg_intrinsic.geometry.pointcloud.neighbors import fps, knn, radius
 
 
 # --------------------------------------------------------------------------

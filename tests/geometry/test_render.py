@@ -8,14 +8,17 @@ import numpy as np
 import pytest
 import torch
 
-from tg_intrinsic.geometry.envmap import (equirect_directions,
+from tg_intrinsic.geometry.appearance.envmap import (equirect_directions,
                                           equirect_lookup,
                                           equirect_solid_angles)
-from tg_intrinsic.geometry.render import (_lookup_numpy, camera_centers,
-                                          point_visibility, rasterize,
-                                          render_images, render_radiance)
-from tg_intrinsic.geometry.sh import (principled_to_torrance_sparrow,
-                                      schlick_fresnel, smith_g1)
+from tg_intrinsic.datasets.capture import render_images
+from tg_intrinsic.geometry.appearance.cameras import camera_centers
+from tg_intrinsic.geometry.appearance.lighting import (_lookup_numpy,
+                                                       render_radiance)
+from tg_intrinsic.geometry.appearance.raster import (point_visibility,
+                                                     rasterize)
+from tg_intrinsic.geometry.appearance.sh import (
+    principled_to_torrance_sparrow, schlick_fresnel, smith_g1)
 
 D64 = torch.float64
 
@@ -222,7 +225,7 @@ def test_render_radiance_bad_input():
 
 # ---------------------------------------------------------- rasteriser
 def camera(eye, target=(0, 0, 0), focal=40.0, size=(40, 48)):
-    from tg_intrinsic.geometry.cameras import look_at_cameras
+    from tg_intrinsic.geometry.appearance.cameras import look_at_cameras
     fov = 2 * math.degrees(math.atan(size[0] / 2 / focal))
     K, E = look_at_cameras(torch.tensor([eye], dtype=D64), target, fov,
                            size)

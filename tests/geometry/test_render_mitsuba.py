@@ -10,7 +10,8 @@ import pytest
 import torch
 
 from tg_intrinsic.datasets import svbrdf_scene
-from tg_intrinsic.geometry.envmap import equirect_lookup, sun_sky_envmap
+from tg_intrinsic.geometry.appearance.envmap import (equirect_lookup,
+                                                     sun_sky_envmap)
 
 mi = pytest.importorskip('mitsuba')
 try:

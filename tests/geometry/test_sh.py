@@ -10,7 +10,7 @@ import torch
 from scipy.special import sph_harm_y
 from scipy.spatial.transform import Rotation
 
-from tg_intrinsic.geometry.sh import (fibonacci_sphere, fit_sh,
+from tg_intrinsic.geometry.appearance.sh import (fibonacci_sphere, fit_sh,
                                       num_coefficients, power_spectrum,
                                       real_sh, sh_index)
 
@@ -166,7 +166,7 @@ def test_bad_input():
 
 
 def test_brdf_terms():
-    from tg_intrinsic.geometry.sh import (brdf_filter,
+    from tg_intrinsic.geometry.appearance.sh import (brdf_filter,
                                           principled_to_torrance_sparrow,
                                           schlick_fresnel, smith_g1)
     alpha = torch.tensor([0.0, 0.1, 0.5], dtype=torch.float64)
@@ -199,8 +199,8 @@ def test_brdf_terms():
 
 
 def test_principled_round_trip():
-    from tg_intrinsic.geometry.sh import (principled_to_torrance_sparrow,
-                                          torrance_sparrow_to_principled)
+    from tg_intrinsic.geometry.appearance.sh import (
+        principled_to_torrance_sparrow, torrance_sparrow_to_principled)
     g = torch.Generator().manual_seed(3)
     base = torch.rand(20000, 3, generator=g, dtype=torch.float64)
     metallic = torch.rand(20000, generator=g, dtype=torch.float64)

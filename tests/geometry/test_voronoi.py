@@ -5,7 +5,7 @@ import torch
 from scipy.sparse.csgraph import dijkstra
 
 from tg_intrinsic.geometry import knn
-from tg_intrinsic.geometry.voronoi import graph_voronoi
+from tg_intrinsic.geometry.multigrid.voronoi import graph_voronoi
 
 
 def test_matches_scipy_multi_source_dijkstra():
@@ -69,8 +69,8 @@ def test_bucket_queue_and_heap_fallback_match_scipy(spread):
 
 
 def test_zero_length_edges_and_sweep_starting_distances():
-    from tg_intrinsic.geometry.voronoi import (_dijkstra_from,
-                                              _heap_dijkstra_from)
+    from tg_intrinsic.geometry.multigrid.voronoi import (_heap_dijkstra_from,
+                                                         dijkstra_from)
     rng = np.random.default_rng(4)
     n = 500
     a = rng.integers(0, n, 3000)
@@ -88,7 +88,7 @@ def test_zero_length_edges_and_sweep_starting_distances():
     seeds = rng.choice(n, 10, replace=False)
     for start in (np.full(n, np.inf), rng.uniform(0.0, 3.0, n)):
         results = []
-        for kernel in (_dijkstra_from, _heap_dijkstra_from):
+        for kernel in (dijkstra_from, _heap_dijkstra_from):
             dist, cell = start.copy(), np.full(n, -1, dtype=np.int64)
             kernel(indptr, indices, weights, seeds, dist, cell)
             results.append(dist)

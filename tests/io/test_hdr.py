@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from tg_intrinsic.geometry.envmap import sun_sky_envmap
+from tg_intrinsic.geometry.appearance.envmap import sun_sky_envmap
 from tg_intrinsic.io import (looks_clipped, read_envmap, read_exr, read_hdr,
                              write_hdr)
 

@@ -9,11 +9,11 @@ import torch
 from torch_geometric.data import Data
 
 from tg_intrinsic.geometry import vertex_normals
-from tg_intrinsic.geometry.cameras import look_at_cameras
+from tg_intrinsic.geometry.appearance.cameras import look_at_cameras
 from tg_intrinsic.io import read_scene, scene_summary, write_ply, write_scene
 from tg_intrinsic.io import scene as scene_module
 
-from ..conftest import icosphere, sky_envmap
+from tests.conftest import icosphere, sky_envmap
 
 try:
     import OpenEXR  # noqa: F401

@@ -5,8 +5,9 @@ import torch
 from torch_geometric.data import Batch, Data
 
 from tg_intrinsic.geometry import knn, tangent_frames
-from tg_intrinsic.geometry.mls import mls_grad_div
-from tg_intrinsic.geometry.operators import SurfaceOperators, rotate_j
+from tg_intrinsic.geometry.pointcloud.mls import mls_grad_div
+from tg_intrinsic.geometry.pointcloud.operators import (SurfaceOperators,
+                                                        rotate_j)
 from tg_intrinsic.nn import DeltaConv, VectorLinear, VectorMLP, VectorNonLin
 from tg_intrinsic.nn.models import (DeltaNetClassification,
                                     DeltaNetSegmentation)
@@ -193,7 +194,8 @@ def test_missing_points_and_bad_data():
 
 def reference_delta_conv(conv, x, v, edge_index, ops):
     """DeltaConv written as the paper states it: concatenate, then MLPs."""
-    from tg_intrinsic.geometry.operators import cat_vectors, vector_norm
+    from tg_intrinsic.geometry.pointcloud.operators import (cat_vectors,
+                                                            vector_norm)
     j, i = edge_index
     if conv.lin_vector is not None:
         u = cat_vectors([v, ops.grad(x), ops.hodge_laplacian(v)])

@@ -13,7 +13,7 @@ import torch
 from tg_intrinsic.nn import FrequencySVBRDF, SVBRDFResult
 from tg_intrinsic.transforms import FitSphericalHarmonics, SpectralUncertainty
 
-from ..conftest import svbrdf_observation_geometry
+from tests.conftest import svbrdf_observation_geometry
 
 
 def ground_truth(pos, metal=True):

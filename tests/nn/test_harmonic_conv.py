@@ -5,8 +5,9 @@ import pytest
 import torch
 from scipy import integrate, special
 
-from tg_intrinsic.geometry.harmonic import (HarmonicOperator, harmonic_terms,
-                                            ring_weights)
+from tg_intrinsic.geometry.geodesics.harmonic import (HarmonicOperator,
+                                                      harmonic_terms,
+                                                      ring_weights)
 from tg_intrinsic.nn import (ComplexBatchNorm, ComplexLinear, ComplexReLU,
                              HarmonicConv, HarmonicResNetBlock)
 from tg_intrinsic.nn.harmonic_resnet_block import harmonic_operators

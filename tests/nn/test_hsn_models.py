@@ -5,7 +5,7 @@ import torch
 from torch_geometric.data import Batch
 
 from tg_intrinsic.data import IntrinsicData
-from tg_intrinsic.geometry.harmonic import harmonic_terms
+from tg_intrinsic.geometry.geodesics.harmonic import harmonic_terms
 from tg_intrinsic.nn.models import HSNClassification, HSNSegmentation
 from tests.nn.test_harmonic_conv import gauge_change, rel
 

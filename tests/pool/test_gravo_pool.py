@@ -7,7 +7,7 @@ from torch_geometric.data import Batch, Data
 from tg_intrinsic.pool import GravoPool, GravoUnpool
 from tg_intrinsic.transforms import GravoHierarchy
 
-from ..conftest import grid_mesh, icosphere
+from tests.conftest import grid_mesh, icosphere
 
 
 def hierarchy(pos, face):

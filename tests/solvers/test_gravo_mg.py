@@ -10,10 +10,10 @@ from scipy.sparse.linalg import cg, spsolve
 from torch_geometric.data import Data
 
 from tg_intrinsic.geometry import cotan_laplacian, lumped_mass, to_scipy
-from tg_intrinsic.solvers import GravoMG
+from tg_intrinsic.solvers import ConvergenceWarning, GravoMG
 from tg_intrinsic.transforms import GravoHierarchy
 
-from ..conftest import grid_mesh
+from tests.conftest import grid_mesh
 
 
 def face_edges(face):
@@ -135,14 +135,19 @@ def test_preconditioned_conjugate_gradients():
 def test_from_transform_and_direct_fallback():
     pos, face = sphere(4)
     # from_mesh builds the same levels as the transform
-    mesh = GravoMG.from_mesh(pos, face, lower_bound=50)
-    with pytest.raises(ValueError, match=r'\(F, 3\)'):
-        GravoMG.from_mesh(pos, face.T)
+    mesh = GravoMG.from_mesh(pos, face.T, lower_bound=50)
+    with pytest.raises(ValueError, match=r'\[3, F\].*looks like \[F, 3\]'):
+        GravoMG.from_mesh(pos, face)
+    with pytest.raises(ValueError, match='indexes vertices'):
+        GravoMG.from_mesh(pos, face.T + 1)
+    tensors = GravoMG.from_mesh(torch.tensor(pos),
+                                torch.tensor(face.T), lower_bound=50)
     data = GravoHierarchy(lower_bound=50)(Data(
         pos=torch.tensor(pos), face=torch.tensor(face).t().contiguous()))
     solver = GravoMG.from_data(data)
-    for a, b in zip(mesh.prolongations, solver.prolongations):
-        assert abs(a - b).max() < 1e-12
+    for a, b, c in zip(mesh.prolongations, solver.prolongations,
+                       tensors.prolongations):
+        assert abs(a - b).max() < 1e-12 and abs(a - c).max() == 0
     A, m = mesh_system(pos, face)
     b = m.copy()
     x = solver.solve(A, b, tol=1e-9)
@@ -181,6 +186,36 @@ def test_bad_input():
         solver.solve(A, b, cycle='X')
     with pytest.raises(ValueError, match='mass'):
         solver.solve(A, b, criterion='mass')
+    zero_row = A.tolil()
+    zero_row[3, :] = 0
+    zero_row[:, 3] = 0
+    with pytest.raises(ValueError, match='zero or negative diagonal.*\\[3\\]'):
+        solver.solve(zero_row.tocsr(), b)
+    for options, match in [
+            (dict(tol=0), "'tol' must be positive"),
+            (dict(tol=float('nan')), "'tol' must be finite"),
+            (dict(max_iter=0), "'max_iter' must be at least 1"),
+            (dict(pre=-1), "'pre' must be at least 0"),
+            (dict(pre=0, post=0), 'both 0'),
+            (dict(x0=np.zeros(5)), "'x0' must have the shape of 'b'"),
+            (dict(x0=np.full_like(b, np.nan)), "'x0' holds NaN"),
+            (dict(x0=torch.full((b.size, ), float('nan')).double()),
+             "'x0' holds NaN")]:
+        with pytest.raises(ValueError, match=match):
+            solver.solve(A, b, **options)
+
+
+def test_not_converging_warns_or_raises():
+    A, m, solver = case('closed')
+    with pytest.warns(ConvergenceWarning, match='max_iter=1 cycles'):
+        x = solver.solve(A, m, tol=1e-12, max_iter=1)
+    assert not solver.info.converged and solver.info.iterations == 1
+    assert 'above tol=1e-12' in solver.info.reason
+    assert np.isfinite(x).all()
+    with pytest.raises(RuntimeError, match='did not converge'):
+        solver.solve(A, m, tol=1e-12, max_iter=1, strict=True)
+    solver.solve(A, m, tol=1e-6, strict=True)
+    assert solver.info.converged and solver.info.reason is None
 
 
 DEVICES = ['cpu'] + (['cuda'] if torch.cuda.is_available() else [])
@@ -211,10 +246,13 @@ def test_torch_batch_equals_columns_one_at_a_time():
     A, m, solver = case('closed')
     b = m[:, None] * np.random.default_rng(7).normal(size=(A.shape[0], 4))
     B = torch.tensor(b)
-    # tol=0: exactly max_iter cycles for the batch and for each column.
-    batch = solver.solve(A, B, tol=0.0, max_iter=3)
+    # a tolerance no cycle reaches: exactly max_iter cycles for the batch
+    # and for each column
+    with pytest.warns(ConvergenceWarning):
+        batch = solver.solve(A, B, tol=1e-300, max_iter=3)
     for k in range(4):
-        column = solver.solve(A, B[:, k], tol=0.0, max_iter=3)
+        with pytest.warns(ConvergenceWarning):
+            column = solver.solve(A, B[:, k], tol=1e-300, max_iter=3)
         assert column.shape == (A.shape[0], )
         assert torch.allclose(batch[:, k], column, rtol=0, atol=1e-14)
 
@@ -246,7 +284,7 @@ def test_divergence_is_an_error_not_nan():
     pos, face = sphere(5)
     A, m = mesh_system(pos, face, alpha=1.0)
     A = (A - sp.diags(m) + 1e-6 * sp.diags(m)).tocsr()  # S + 1e-6 M
-    solver = GravoMG.from_mesh(pos, face, lower_bound=100)
+    solver = GravoMG.from_mesh(pos, face.T, lower_bound=100)
     b = m * np.random.default_rng(10).normal(size=A.shape[0])
     with pytest.raises(RuntimeError, match='diverge.*float64'):
         solver.solve(A, torch.tensor(b, dtype=torch.float32))

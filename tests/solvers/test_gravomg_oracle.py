@@ -11,7 +11,7 @@ import trimesh
 
 from tg_intrinsic.solvers import GravoMG
 
-from .test_gravo_mg import face_edges, mesh_system
+from tests.solvers.test_gravo_mg import face_edges, mesh_system
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))

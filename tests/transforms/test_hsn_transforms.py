@@ -7,9 +7,10 @@ from torch_geometric.data import Batch, Data
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry import tangent_frames, vertex_normals
 from tg_intrinsic.nn.models import HSNClassification, HSNSegmentation
-from tg_intrinsic.transforms import (HarmonicPrecompute, LogMap,
-                                     MultiscaleSupports, NormalizeArea,
-                                     ParallelTransport, RandomRotation)
+from tg_intrinsic.transforms import (EstimateNormals, HarmonicPrecompute,
+                                     LogMap, MultiscaleSupports,
+                                     NormalizeArea, ParallelTransport,
+                                     RandomRotation)
 from tests.conftest import icosphere
 
 
@@ -140,9 +141,21 @@ def test_models_run_on_precomputed_meshes_and_are_gauge_invariant(Model):
     assert (out2 - out).abs().max() <= 1e-8 * out.abs().max()
 
 
+def test_log_map_of_a_cloud_without_normals_estimates_them():
+    torch.manual_seed(0)
+    pos = torch.randn(200, 3, dtype=torch.float64)
+    pos = pos / pos.norm(dim=1, keepdim=True)
+    implicit = LogMap(0.5)(Data(pos=pos))
+    explicit = LogMap(0.5)(EstimateNormals()(Data(pos=pos)))
+    assert torch.equal(implicit.frame, explicit.frame)
+    assert torch.equal(implicit.logmap, explicit.logmap)
+    # outward normals, as estimate_normals orients them
+    assert bool(((implicit.frame[:, 2] * pos).sum(1) > 0).all())
+
+
 def test_bad_input():
-    with pytest.raises(ValueError, match='normals'):
-        LogMap(0.2)(Data(pos=torch.rand(30, 3)))
+    with pytest.raises(ValueError, match="'data.normal' has 29 rows"):
+        LogMap(0.2)(Data(pos=torch.rand(30, 3), normal=torch.rand(29, 3)))
     with pytest.raises(ValueError, match="'method' must be one of"):
         LogMap(0.2, method='exact')
     with pytest.raises(ValueError, match='apply LogMap'):

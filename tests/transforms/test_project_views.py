@@ -6,8 +6,8 @@ import pytest
 import torch
 from torch_geometric.data import Data
 
-from tg_intrinsic.geometry.cameras import camera_centers, project
-from tg_intrinsic.geometry.sh import fibonacci_sphere
+from tg_intrinsic.geometry.appearance.cameras import camera_centers, project
+from tg_intrinsic.geometry.appearance.sh import fibonacci_sphere
 from tg_intrinsic.transforms import ProjectViews
 
 SIZE = 96

@@ -159,7 +159,7 @@ def test_raw_scan_to_hsn_inputs_in_one_compose():
 
 
 def test_size_check_fires_quickly_on_a_50k_vertex_scan(monkeypatch):
-    from tg_intrinsic.geometry import logmap as L
+    from tg_intrinsic.geometry.geodesics import logmap as L
     torus = bumpy_torus(50000)
     data = Data(pos=torus.pos.float(), face=torus.face)
 

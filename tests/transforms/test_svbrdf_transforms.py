@@ -5,12 +5,12 @@ import pytest
 import torch
 from torch_geometric.data import Batch
 
-from tg_intrinsic.geometry.brdf import reflect, to_local
-from tg_intrinsic.geometry.envmap import equirect_directions
-from tg_intrinsic.geometry.sh import real_sh
+from tg_intrinsic.geometry.appearance.brdf import reflect, to_local
+from tg_intrinsic.geometry.appearance.envmap import equirect_directions
+from tg_intrinsic.geometry.appearance.sh import real_sh
 from tg_intrinsic.transforms import FitSphericalHarmonics, SpectralUncertainty
 
-from ..conftest import svbrdf_observation_geometry
+from tests.conftest import svbrdf_observation_geometry
 
 
 def band_limited_envmap(coefficients, height=64, width=128):
@@ -25,8 +25,7 @@ def test_light_samples_follow_the_local_frame():
     data = svbrdf_observation_geometry(50, 30)
     data.envmap = band_limited_envmap(coefficients)
     out = FitSphericalHarmonics(prefilter_alpha=0.0)(data)
-    from tg_intrinsic.transforms.fit_spherical_harmonics import \
-        light_directions
+    from tg_intrinsic.geometry.appearance.sh import light_directions
     world = light_directions(out.light_radiance.size(1)) @ out.frame
     want = real_sh(world, 3) @ coefficients
     # bilinear lookup of a smooth map: close to the analytic light
@@ -41,7 +40,7 @@ def test_outgoing_fit_recovers_a_band_limited_reflection():
     data = svbrdf_observation_geometry(20, 150)
     g = torch.Generator().manual_seed(1)
     coefficients = torch.randn(20, 36, 3, generator=g, dtype=torch.float64)
-    from tg_intrinsic.geometry.frames import tangent_frames
+    from tg_intrinsic.geometry.pointcloud.frames import tangent_frames
     frame = tangent_frames(data.normal)
     mirror = to_local(reflect(data.obs_dir, data.normal.unsqueeze(1)), frame)
     data.obs_radiance = real_sh(mirror, 5) @ coefficients

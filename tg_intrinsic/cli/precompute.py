@@ -65,7 +65,7 @@ KINDS = {
 
 
 def add_arguments(parser):
-    from tg_intrinsic.geometry.logmap import METHODS
+    from tg_intrinsic.geometry.geodesics.logmap import METHODS
     from tg_intrinsic.train import hsn_pipeline
     from tg_intrinsic.transforms import (EstimateNormals, GravoHierarchy,
                                          MLSOperators)

@@ -14,7 +14,7 @@ from tg_intrinsic.io.labels import (LABEL_KINDS, check_labels,
                                     read_soft_labels, scores_to_labels)
 from tg_intrinsic.io.mesh import read_mesh
 
-from ._common import (FolderDataset, check_int, check_option, check_task,
+from .common import (FolderDataset, check_int, check_option, check_task,
                       find_label_file, list_files)
 
 EXTENSIONS = ('.obj', '.off', '.ply')

@@ -7,7 +7,7 @@ import torch
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.io.points import read_points
 
-from ._common import FolderDataset, check_int, check_option
+from .common import FolderDataset, check_int, check_option
 
 LAYOUT = ("modelnet40_normal_resampled/ with modelnet40_shape_names.txt, "
           "modelnet40_train.txt, modelnet40_test.txt (and the modelnet10_* "

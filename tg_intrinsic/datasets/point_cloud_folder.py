@@ -8,7 +8,7 @@ from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.io.labels import check_labels, read_labels, to_int_labels
 from tg_intrinsic.io.points import POINT_EXTENSIONS, read_points
 
-from ._common import (FolderDataset, check_int, check_task, find_label_file,
+from .common import (FolderDataset, check_int, check_task, find_label_file,
                       list_files)
 
 # label files beside a point file, and in the label folders

@@ -7,7 +7,7 @@ import torch
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.io.labels import check_labels, to_int_labels
 
-from ._common import FolderDataset, check_option
+from .common import FolderDataset, check_option
 
 # variant: (folder, file name after 'training_' / 'test_')
 VARIANTS = {

@@ -10,7 +10,7 @@ from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.io.labels import to_int_labels
 from tg_intrinsic.io.points import read_points
 
-from ._common import FolderDataset
+from .common import FolderDataset
 
 LAYOUT = ("shapenetcore_partanno_segmentation_benchmark_v0_normal/ with "
           "synsetoffset2category.txt, <synset>/<token>.txt and "

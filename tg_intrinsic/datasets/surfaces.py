@@ -5,7 +5,7 @@ import numpy as np
 import torch
 from torch_geometric.data import Data
 
-from ._common import check_int, shape_rng
+from .common import check_int, shape_rng
 
 
 def bumpy_torus(num_vertices: int = 204800, seed: int = 0) -> Data:

@@ -10,18 +10,21 @@ import torch
 from torch import Tensor
 from torch_geometric.data import Data
 
-from tg_intrinsic.geometry._checks import check_faces, check_points
-from tg_intrinsic.geometry.cameras import (camera_centers, check_image_size,
-                                          look_at_cameras)
-from tg_intrinsic.geometry.envmap import check_envmap, sun_sky_envmap
+from tg_intrinsic.geometry.appearance.cameras import (camera_centers,
+                                                      look_at_cameras)
+from tg_intrinsic.geometry.appearance.envmap import (check_envmap,
+                                                     sun_sky_envmap)
+from tg_intrinsic.geometry.appearance.lighting import render_radiance
+from tg_intrinsic.geometry.appearance.raster import point_visibility
+from tg_intrinsic.geometry.appearance.sh import fibonacci_sphere
+from tg_intrinsic.geometry.checks import (check_faces, check_image_size,
+                                          check_points)
 from tg_intrinsic.geometry.mesh import vertex_normals
-from tg_intrinsic.geometry.render import (point_visibility,
-                                          render_images as _render_images,
-                                          render_radiance)
 from tg_intrinsic.io.hdr import read_envmap
-from tg_intrinsic.geometry.sh import fibonacci_sphere
 
-from ._common import check_int
+from .capture import render_images as _render_images
+
+from .common import check_int
 
 SHAPES = ('sphere', )
 MATERIALS = ('metals', 'dielectrics', 'mixed')
@@ -67,7 +70,7 @@ def _load_shape(shape, resolution, seed):
         pos, face = pos[used], remap[face]
     if resolution is not None and resolution < pos.size(0):
         from tg_intrinsic.geometry.mesh import is_closed_manifold
-        from ._decimate import decimate
+        from .quadric_decimation import decimate
         resolution = check_int(resolution, 'resolution', 4)
         if not is_closed_manifold(face, pos.size(0)):
             raise ValueError("'resolution' (a target vertex count) needs a "
@@ -163,7 +166,7 @@ def svbrdf_scene(shape: Union[str, Tuple[Tensor, Tensor]] = 'sphere',
                  dtype: torch.dtype = torch.float32) -> Data:
     r"""A synthetic multi-view capture of an object with a spatially varying
     principled BRDF under a distant environment map, whose ground truth is
-    the full reflection integral (:mod:`tg_intrinsic.geometry.render`),
+    the full reflection integral (:mod:`tg_intrinsic.geometry.appearance.lighting`),
     not the spherical-harmonic approximation of the method under test
     ("Uncertainty for SVBRDF acquisition using frequency analysis",
     Wiersma et al., SIGGRAPH 2025):
@@ -193,7 +196,7 @@ def svbrdf_scene(shape: Union[str, Tuple[Tensor, Tensor]] = 'sphere',
     projects inside the image in front of the camera,
     :math:`\mathbf{n}_i \cdot \omega_{iv} > 0`, and the segment to the
     camera crosses no triangle (exact ray casting,
-    :func:`~tg_intrinsic.geometry.render.point_visibility`).
+    :func:`~tg_intrinsic.geometry.appearance.raster.point_visibility`).
     ``obs_radiance`` is 0 where ``obs_mask`` is False.
 
     Args:
@@ -231,7 +234,7 @@ def svbrdf_scene(shape: Union[str, Tuple[Tensor, Tensor]] = 'sphere',
         envmap_size (tuple, optional): Size of the ``'sun_sky'`` map.
             (default: :obj:`(128, 256)`)
         specular_samples (int, optional): For ``obs_radiance``, see
-            :func:`~tg_intrinsic.geometry.render.render_radiance`.
+            :func:`~tg_intrinsic.geometry.appearance.lighting.render_radiance`.
             (default: :obj:`96`)
         light_samples (int, optional): Ditto. (default: :obj:`128`)
         image_specular_samples (int, optional): For ``images`` (noisier:

@@ -6,10 +6,10 @@ import torch
 from tqdm.auto import tqdm
 
 from tg_intrinsic.data import IntrinsicData
-from tg_intrinsic.geometry.neighbors import fps
+from tg_intrinsic.geometry.pointcloud.neighbors import fps
 
-from . import _modelnet_shapes as shapes
-from ._common import (GeneratedDataset, check_int, check_split, fmt,
+from . import modelnet_shapes as shapes
+from .common import (GeneratedDataset, check_int, check_split, fmt,
                       save_atomic, shape_rng)
 
 

@@ -7,8 +7,8 @@ from tqdm.auto import tqdm
 
 from tg_intrinsic.data import IntrinsicData
 
-from . import _shrec_shapes as shapes
-from ._common import (GeneratedDataset, check_int, check_split, fmt,
+from . import shrec_shapes as shapes
+from .common import (GeneratedDataset, check_int, check_split, fmt,
                       save_atomic, shape_rng)
 
 

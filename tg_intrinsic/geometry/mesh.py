@@ -10,7 +10,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from ._checks import (check_faces, check_nondegenerate, check_points,
+from .checks import (check_faces, check_nondegenerate, check_points,
                       check_positive_float, check_positive_int)
 
 

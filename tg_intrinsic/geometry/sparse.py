@@ -1,4 +1,5 @@
-"""Conversions between torch sparse tensors and scipy.sparse matrices."""
+"""Conversions between torch sparse tensors and scipy.sparse matrices, and
+a sparse product with a precomputed adjoint for autograd."""
 import numpy as np
 import scipy.sparse as sp
 import torch
@@ -45,3 +46,16 @@ def from_scipy(matrix, dtype: torch.dtype = None,
     out = torch.sparse_coo_tensor(index, value, coo.shape,
                                   check_invariants=False).coalesce()
     return out.to(device) if device is not None else out
+
+
+class SparseMM(torch.autograd.Function):
+    """``A @ x`` whose backward uses a precomputed ``A^T`` (torch's own
+    backward transposes and re-sorts the sparse matrix on every call)."""
+    @staticmethod
+    def forward(ctx, matrix: Tensor, transposed: Tensor, x: Tensor):
+        ctx.transposed = transposed
+        return torch.sparse.mm(matrix, x)
+
+    @staticmethod
+    def backward(ctx, grad_out: Tensor):
+        return None, None, torch.sparse.mm(ctx.transposed, grad_out)

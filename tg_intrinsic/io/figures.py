@@ -2,7 +2,7 @@ r"""Figures a person can read: values drawn on a surface from a few
 viewpoints with a titled colour bar, and line plots, saved atomically as
 PNG.
 
-Meshes are rasterised (:func:`~tg_intrinsic.geometry.render.rasterize`),
+Meshes are rasterised (:func:`~tg_intrinsic.geometry.appearance.raster.rasterize`),
 values interpolated by the barycentrics of each pixel's triangle and shaded
 by a headlight, :math:`c = \text{cmap}(v) (0.35 + 0.65 |n \cdot d|)`.
 Point clouds are splatted as discs as wide as their spacing, nearest
@@ -42,7 +42,7 @@ def save_figure(fig, path: str, dpi: int = 110) -> str:
 
 
 def _cameras(pos: torch.Tensor, directions, size: int):
-    from tg_intrinsic.geometry.cameras import look_at_cameras
+    from tg_intrinsic.geometry.appearance.cameras import look_at_cameras
     centre = 0.5 * (pos.max(0).values + pos.min(0).values)
     radius = float((pos - centre).norm(dim=1).max()) or 1.0
     direction = torch.tensor(directions, dtype=torch.float64)
@@ -67,7 +67,7 @@ def splat_index(pos: torch.Tensor, intrinsics: torch.Tensor,
         image_size: ``(height, width)``.
     """
     from tg_intrinsic.geometry import knn
-    from tg_intrinsic.geometry.cameras import project
+    from tg_intrinsic.geometry.appearance.cameras import project
     pos = pos.detach().cpu().double()
     height, width = image_size
     K = intrinsics.detach().cpu().double().reshape(1, 3, 3)
@@ -126,7 +126,7 @@ def render_surface(pos, face=None, values=None, colors=None, normal=None,
     :math:`(N)` through ``cmap``, or by ``colors`` :math:`(N, 3)` in
     [0, 1], or grey."""
     import matplotlib
-    from tg_intrinsic.geometry.render import rasterize
+    from tg_intrinsic.geometry.appearance.raster import rasterize
     pos = torch.as_tensor(np.asarray(pos, dtype=np.float64))
     n = pos.size(0)
     if colors is not None:

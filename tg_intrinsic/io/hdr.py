@@ -440,9 +440,9 @@ def looks_clipped(image) -> bool:
 def read_envmap(path) -> torch.Tensor:
     r"""Reads an equirectangular environment map (``.hdr``/``.pic``,
     ``.exr`` or ``.npy``) as a float32 tensor :math:`(H, W, 3)` in the
-    convention of :mod:`tg_intrinsic.geometry.envmap` (row 0 looks up,
+    convention of :mod:`tg_intrinsic.geometry.appearance.envmap` (row 0 looks up,
     :math:`+z`), validated by
-    :func:`~tg_intrinsic.geometry.envmap.check_envmap`.
+    :func:`~tg_intrinsic.geometry.appearance.envmap.check_envmap`.
 
     Warns with a :class:`UserWarning` when the map
     :func:`looks_clipped` (an LDR panorama underestimates the sun by
@@ -451,7 +451,7 @@ def read_envmap(path) -> torch.Tensor:
     Args:
         path (str or os.PathLike): The file.
     """
-    from tg_intrinsic.geometry.envmap import check_envmap
+    from tg_intrinsic.geometry.appearance.envmap import check_envmap
     path = os.fspath(path)
     extension = os.path.splitext(path)[1].lower()
     if extension in ('.hdr', '.pic', '.rgbe'):

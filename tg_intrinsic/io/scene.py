@@ -6,7 +6,7 @@ lighting, linear HDR photographs and their calibrated cameras, which
 (Wiersma et al., SIGGRAPH 2025) and ``tg-intrinsic svbrdf``.
 
 Cameras follow the OpenCV convention of
-:mod:`tg_intrinsic.geometry.cameras`: :math:`x_c = R x + t` maps a world
+:mod:`tg_intrinsic.geometry.appearance.cameras`: :math:`x_c = R x + t` maps a world
 point to camera coordinates, the camera looks along :math:`+z_c` with
 :math:`x_c` right and :math:`y_c` down in the image, and
 :math:`(u, v) = (f_x x_c / z_c + c_x, f_y y_c / z_c + c_y)` in pixels
@@ -15,7 +15,7 @@ where pixel (row :math:`i`, column :math:`j`) covers
 :math:`(j + \frac12, i + \frac12)`. (OpenCV and COLMAP put pixel centres
 at integers: add 0.5 to their :math:`c_x, c_y`.) The environment map is
 equirectangular with world :math:`z` up, as in
-:mod:`tg_intrinsic.geometry.envmap`. All radiance is linear: 8-bit or
+:mod:`tg_intrinsic.geometry.appearance.envmap`. All radiance is linear: 8-bit or
 tone-mapped photographs are not HDR.
 
 The format (:data:`FORMAT`, also shown by ``tg-intrinsic svbrdf --help``):

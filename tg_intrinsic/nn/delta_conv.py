@@ -5,8 +5,9 @@ import torch.nn.functional as F
 from torch import Tensor
 from torch_geometric.nn import MLP, MessagePassing
 
-from tg_intrinsic.geometry.operators import (SurfaceOperators, interleaved,
-                                             planar, vector_norm)
+from tg_intrinsic.geometry.pointcloud.operators import (SurfaceOperators,
+                                                        interleaved, planar,
+                                                        vector_norm)
 from tg_intrinsic.nn.vector_linear import VectorLinear
 from tg_intrinsic.nn.vector_mlp import VectorMLP
 from tg_intrinsic.nn.vector_nonlin import VectorNonLin

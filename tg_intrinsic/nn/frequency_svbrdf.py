@@ -8,10 +8,13 @@ from torch.nn import Parameter
 from torch_geometric.data import Data
 
 from tg_intrinsic.geometry import knn, mesh_edges
-from tg_intrinsic.geometry.brdf import (MIN_ALPHA, dominant_direction,
-                                        sh_reflectance)
-from tg_intrinsic.geometry.sh import real_sh, smith_g1
-from tg_intrinsic.geometry._checks import (check_choice,
+from tg_intrinsic.geometry.appearance.brdf import (MIN_ALPHA,
+                                                   dominant_direction,
+                                                   sh_reflectance)
+from tg_intrinsic.geometry.appearance.sh import (light_directions,
+                                                 light_fit_matrix, real_sh,
+                                                 smith_g1)
+from tg_intrinsic.geometry.checks import (check_choice,
                                            check_positive_float,
                                            check_positive_int)
 from tg_intrinsic.nn.svbrdf_result import SVBRDFResult
@@ -57,7 +60,7 @@ class FrequencySVBRDF(torch.nn.Module):
             exact directional albedo of the GGX lobe,
             :math:`R_0 A(\theta_o, \alpha) + B(\theta_o, \alpha)`, in place
             of :math:`F G_\alpha(\theta_o)` and the shadowing (see
-            :func:`~tg_intrinsic.geometry.brdf.sh_reflectance`).
+            :func:`~tg_intrinsic.geometry.appearance.brdf.sh_reflectance`).
             (default: :obj:`'eq5.11'`)
 
     Shapes:
@@ -128,8 +131,6 @@ class FrequencySVBRDF(torch.nn.Module):
         r"""The incoming SH of :math:`G_\alpha(\theta_i) L` with the current
         roughness (no gradient: refitted every few steps, as the
         original). :math:`G_\alpha` is 0 below the horizon."""
-        from tg_intrinsic.transforms.fit_spherical_harmonics import (
-            light_directions, light_fit_matrix)
         dtype = data.sh_in.dtype
         light = data.light_radiance.to(dtype)
         l_max = int(round(math.sqrt(data.sh_in.size(1)))) - 1

@@ -6,7 +6,7 @@ from torch import Tensor
 from torch.nn import Parameter
 from torch_geometric.nn import MessagePassing
 
-from tg_intrinsic.geometry.harmonic import HarmonicOperator
+from tg_intrinsic.geometry.geodesics.harmonic import HarmonicOperator
 
 
 class HarmonicConv(MessagePassing):
@@ -28,7 +28,7 @@ class HarmonicConv(MessagePassing):
     invariant.
 
     The neighbourhoods are aggregated first through a sparse
-    :class:`~tg_intrinsic.geometry.harmonic.HarmonicOperator` and contracted
+    :class:`~tg_intrinsic.geometry.geodesics.harmonic.HarmonicOperator` and contracted
     with the weights afterwards, so memory grows with
     :math:`N \cdot Q \cdot \text{orders}^2 \cdot C`, never with
     :math:`E \cdot Q \cdot \text{orders}^2 \cdot C`; ``backend='message'``

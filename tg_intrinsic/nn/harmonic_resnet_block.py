@@ -1,7 +1,7 @@
 import torch
 from torch import Tensor
 
-from tg_intrinsic.geometry.harmonic import (HarmonicOperator,
+from tg_intrinsic.geometry.geodesics.harmonic import (HarmonicOperator,
                                              harmonic_layout)
 from tg_intrinsic.nn.complex_batch_norm import ComplexBatchNorm
 from tg_intrinsic.nn.complex_linear import ComplexLinear

@@ -75,7 +75,7 @@ class SVBRDFResult:
         camera (the first of :obj:`intrinsics` / :obj:`extrinsics`, else
         one above the object looking down :math:`-z`): on the surface
         when :obj:`face` is given (rasterised,
-        :func:`~tg_intrinsic.geometry.render.rasterize`, values
+        :func:`~tg_intrinsic.geometry.appearance.raster.rasterize`, values
         interpolated by the barycentrics), else as splats as wide as the
         point spacing (:func:`~tg_intrinsic.io.figures.splat_index`); the
         background is black.
@@ -136,8 +136,8 @@ def _point_map_pixels(pos, face, intrinsics, extrinsics, image_size):
     (H, W, k))``, the points whose values are blended (k = 3 triangle
     corners weighted by barycentrics, or k = 1 splatted point), index -1
     on the background."""
-    from tg_intrinsic.geometry.cameras import look_at_cameras
-    from tg_intrinsic.geometry.render import rasterize
+    from tg_intrinsic.geometry.appearance.cameras import look_at_cameras
+    from tg_intrinsic.geometry.appearance.raster import rasterize
     from tg_intrinsic.io.figures import splat_index
     if pos is None:
         raise ValueError("saving point maps as images needs 'pos' (and "

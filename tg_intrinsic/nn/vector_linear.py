@@ -3,7 +3,7 @@ import math
 import torch
 from torch import Tensor
 
-from tg_intrinsic.geometry.operators import interleaved, planar
+from tg_intrinsic.geometry.pointcloud.operators import interleaved, planar
 
 
 class VectorLinear(torch.nn.Module):

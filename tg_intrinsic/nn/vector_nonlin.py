@@ -1,7 +1,8 @@
 import torch
 from torch import Tensor
 
-from tg_intrinsic.geometry.operators import interleaved, planar, vector_norm
+from tg_intrinsic.geometry.pointcloud.operators import (interleaved, planar,
+                                                        vector_norm)
 
 
 class VectorNonLin(torch.nn.Module):

@@ -1,19 +1,7 @@
 import torch
 from torch import Tensor
 
-
-def _check_prolongation(x: Tensor, prolong_index: Tensor,
-                        prolong_weight: Tensor, rows: int, side: str):
-    if prolong_index.dim() != 2 or prolong_index.size(0) != 2:
-        raise ValueError(f"'prolong_index' must be [2, nnz], got "
-                         f"{list(prolong_index.shape)}")
-    if prolong_weight.shape != prolong_index.shape[1:]:
-        raise ValueError("'prolong_weight' must hold one weight per column "
-                         "of 'prolong_index'")
-    index = prolong_index[0 if side == 'fine' else 1]
-    if index.numel() and int(index.max()) >= rows:
-        raise ValueError(f"'prolong_index' refers to {side} point "
-                         f"{int(index.max())} but x has {rows} rows")
+from tg_intrinsic.geometry.checks import check_prolongation
 
 
 class GravoPool(torch.nn.Module):
@@ -36,7 +24,7 @@ class GravoPool(torch.nn.Module):
     """
     def forward(self, x: Tensor, prolong_index: Tensor,
                 prolong_weight: Tensor, num_coarse: int) -> Tensor:
-        _check_prolongation(x, prolong_index, prolong_weight, x.size(0),
+        check_prolongation(x, prolong_index, prolong_weight, x.size(0),
                             'fine')
         fine, coarse = prolong_index
         weight = prolong_weight.to(x.dtype)

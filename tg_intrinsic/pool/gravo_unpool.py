@@ -1,7 +1,7 @@
 import torch
 from torch import Tensor
 
-from tg_intrinsic.pool.gravo_pool import _check_prolongation
+from tg_intrinsic.geometry.checks import check_prolongation
 
 
 class GravoUnpool(torch.nn.Module):
@@ -18,7 +18,7 @@ class GravoUnpool(torch.nn.Module):
     """
     def forward(self, x: Tensor, prolong_index: Tensor,
                 prolong_weight: Tensor, num_fine: int) -> Tensor:
-        _check_prolongation(x, prolong_index, prolong_weight, x.size(0),
+        check_prolongation(x, prolong_index, prolong_weight, x.size(0),
                             'coarse')
         fine, coarse = prolong_index
         shape = (-1, ) + (1, ) * (x.dim() - 1)

@@ -3,7 +3,7 @@ from typing import Optional
 import torch
 from torch import Tensor
 
-from tg_intrinsic.geometry.harmonic import transport_features
+from tg_intrinsic.geometry.geodesics.harmonic import transport_features
 
 
 class ParallelTransportPool(torch.nn.Module):

@@ -1,7 +1,7 @@
 import torch
 from torch import Tensor
 
-from tg_intrinsic.geometry.harmonic import transport_features
+from tg_intrinsic.geometry.geodesics.harmonic import transport_features
 
 
 class ParallelTransportUnpool(torch.nn.Module):

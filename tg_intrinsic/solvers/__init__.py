@@ -1,5 +1,5 @@
 """Solvers for linear systems on surfaces."""
-from .gravo_mg import GravoMG, SolveInfo
+from .gravo_mg import ConvergenceWarning, GravoMG, SolveInfo
 from .systems import poisson, smooth, stiffness_and_mass
 
-__all__ = ['GravoMG', 'SolveInfo', 'smooth', 'poisson', 'stiffness_and_mass']
+__all__ = ['GravoMG', 'SolveInfo', 'ConvergenceWarning', 'smooth', 'poisson', 'stiffness_and_mass']

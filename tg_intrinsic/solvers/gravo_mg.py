@@ -1,15 +1,20 @@
 import time
+import warnings
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Union
 
 import numpy as np
 import scipy.sparse as sp
 import torch
 from pyamg.relaxation.relaxation import gauss_seidel
 from scipy.sparse.linalg import LinearOperator, splu
+from torch import Tensor
 
-from tg_intrinsic.geometry._checks import check_choice
-from tg_intrinsic.geometry.gravo import gravo_hierarchy
+from tg_intrinsic.geometry.checks import (check_choice, check_edge_index,
+                                          check_faces, check_points,
+                                          check_positive_float,
+                                          check_positive_int)
+from tg_intrinsic.geometry.multigrid.gravo import gravo_hierarchy
 from tg_intrinsic.solvers._kernels import (check_matrix, fingerprint,
                                            galerkin, matvec)
 from tg_intrinsic.solvers._torch_levels import TorchLevels
@@ -18,14 +23,20 @@ CYCLES = ('V', 'W', 'F')
 CRITERIA = ('relative', 'mass')
 
 
+class ConvergenceWarning(UserWarning):
+    """A :meth:`GravoMG.solve` stopped at ``max_iter`` cycles above its
+    tolerance (``strict=True`` raises instead)."""
+
+
 @dataclass
 class SolveInfo:
     """What a :meth:`GravoMG.solve` did: the iterations (cycles), the
     largest residual over the columns after each (relative, or
-    mass-weighted) and the seconds since the solve began at each, whether it reached the tolerance, the setup time (only
-    the cache lookup when the matrix was seen before: ``cached``) and the
-    solve time in seconds, and ``direct`` with the reason when there was no
-    hierarchy to cycle on."""
+    mass-weighted) and the seconds since the solve began at each, whether
+    it reached the tolerance and, if not, ``reason`` why; the setup time
+    (only the cache lookup when the matrix was seen before: ``cached``)
+    and the solve time in seconds, and ``direct`` with the reason when
+    there was no hierarchy to cycle on."""
     iterations: int = 0
     residuals: List[float] = field(default_factory=list)
     times: List[float] = field(default_factory=list)
@@ -34,6 +45,7 @@ class SolveInfo:
     solve_time: float = 0.0
     cached: bool = False
     direct: Optional[str] = None
+    reason: Optional[str] = None
 
 
 class _Levels:
@@ -74,8 +86,7 @@ class GravoMG:
 
     and one cycle smooths with forward Gauss-Seidel sweeps (pyamg's
     compiled kernel) before and after the coarse correction, as the
-    original does (measured: 7 cycles to :math:`10^{-8}` where backward
-    post-smoothing takes 9), restricts the residual with
+    original does, restricts the residual with
     :math:`P_l^\top`, corrects recursively, and solves the coarsest level
     directly. As a preconditioner the post-smoothing runs backward, which
     makes the cycle a symmetric operator, as conjugate gradients need. A
@@ -92,6 +103,14 @@ class GravoMG:
             :meth:`from_points`.
         cache_size (int, optional): Matrices whose setup is kept.
             (default: :obj:`4`)
+
+    Shapes:
+        - **input:** :math:`A` :math:`(n_0, n_0)` (scipy sparse), right-hand
+          sides :math:`b` :math:`(n_0)` or :math:`(n_0, C)` (numpy, or torch
+          on any device for the torch backend), optional :math:`x_0` like
+          :math:`b`
+        - **output:** :math:`x` like :math:`b`; :attr:`info` a
+          :class:`SolveInfo`
     """
     def __init__(self, prolongations: Sequence[sp.spmatrix],
                  cache_size: int = 4):
@@ -107,14 +126,21 @@ class GravoMG:
         self.info = SolveInfo()
 
     @classmethod
-    def from_points(cls, pos: np.ndarray, edge_index: np.ndarray,
+    def from_points(cls, pos: Union[Tensor, np.ndarray],
+                    edge_index: Union[Tensor, np.ndarray],
                     **hierarchy) -> 'GravoMG':
-        """Builds the hierarchy of points (N, 3) with the neighbour graph
-        ``edge_index`` (2, E); keyword arguments go to
-        :func:`~tg_intrinsic.geometry.gravo.gravo_hierarchy`."""
-        levels = gravo_hierarchy(np.asarray(pos, dtype=np.float64),
-                                 np.asarray(edge_index), **hierarchy)
-        n = np.asarray(pos).shape[0]
+        """Builds the hierarchy of points :math:`(N, 3)` with the neighbour
+        graph ``edge_index`` :math:`(2, E)` (tensors or arrays); keyword
+        arguments (``ratio``, ``lower_bound``, ...) go to
+        :func:`~tg_intrinsic.geometry.multigrid.gravo.gravo_hierarchy`."""
+        pos = check_points(torch.as_tensor(pos)).detach().double().cpu()
+        edge_index = torch.as_tensor(edge_index)
+        if not edge_index.is_floating_point():
+            edge_index = edge_index.long()
+        edge_index = check_edge_index(edge_index, pos.size(0), pos)
+        levels = gravo_hierarchy(pos.numpy(), edge_index.cpu().numpy(),
+                                 **hierarchy)
+        n = pos.size(0)
         out = []
         for level in levels:
             out.append(sp.csr_matrix(
@@ -124,16 +150,18 @@ class GravoMG:
         return cls(out)
 
     @classmethod
-    def from_mesh(cls, pos: np.ndarray, face: np.ndarray,
-                  **hierarchy) -> 'GravoMG':
-        """Builds the hierarchy of a triangle mesh, ``pos`` (N, 3) and
-        ``face`` (F, 3), on its edges."""
-        face = np.asarray(face)
-        if face.ndim != 2 or face.shape[1] != 3:
-            raise ValueError(f"'face' must have shape (F, 3), got "
-                             f"{face.shape}")
-        edges = np.concatenate([face[:, [0, 1]], face[:, [1, 2]],
-                                face[:, [2, 0]]]).T
+    def from_mesh(cls, pos: Union[Tensor, np.ndarray],
+                  face: Union[Tensor, np.ndarray], **hierarchy) -> 'GravoMG':
+        """Builds the hierarchy of a triangle mesh, ``pos`` :math:`(N, 3)`
+        and ``face`` :math:`(3, F)` like every function of the library
+        (tensors or arrays), on its edges; keyword arguments as in
+        :meth:`from_points`."""
+        pos = check_points(torch.as_tensor(pos)).detach().double().cpu()
+        face = torch.as_tensor(face)
+        if not face.is_floating_point():
+            face = face.long()
+        face = check_faces(face, pos.size(0), pos)
+        edges = torch.cat([face[[0, 1]], face[[1, 2]], face[[2, 0]]], 1)
         return cls.from_points(pos, edges, **hierarchy)
 
     @classmethod
@@ -180,6 +208,12 @@ class GravoMG:
             raise ValueError("'A' is not symmetric; Gravo MG (Galerkin "
                              "coarsening, Gauss-Seidel smoothing) needs a "
                              "symmetric positive definite matrix")
+        bad = np.flatnonzero(A.diagonal() <= 0)
+        if bad.size:
+            raise ValueError(f"'A' has {bad.size} zero or negative diagonal "
+                             f"entries (first rows: {bad[:5].tolist()}), so "
+                             f"it is not positive definite (a row without "
+                             f"a mass or stiffness term?)")
 
     def setup(self, A) -> _Levels:
         """The cached Galerkin operators and coarse factorisation of A,
@@ -221,7 +255,7 @@ class GravoMG:
 
     def solve(self, A, b, x0=None, tol: float = 1e-4, max_iter: int = 100,
               criterion: str = 'relative', mass=None, pre: int = 2,
-              post: int = 2, cycle: str = 'V'):
+              post: int = 2, cycle: str = 'V', strict: bool = False):
         r"""Cycles until the residual :math:`r = b - A x` is small:
         ``'relative'``: :math:`\|r\| / \|b\|`, ``'mass'``:
         :math:`\|r\|_{M^{-1}} / \|b\|_{M^{-1}}` with the lumped masses
@@ -242,9 +276,19 @@ class GravoMG:
         Without a hierarchy (fewer points than its lower bound) the system
         is solved directly (on the CPU) and :attr:`info` says so. Returns
         :math:`x` of the type, shape, device and dtype of :obj:`b`;
-        :attr:`info` holds a :class:`SolveInfo`."""
+        :attr:`info` holds a :class:`SolveInfo`. A solve that stops at
+        :obj:`max_iter` cycles above :obj:`tol` returns its last iterate,
+        sets ``info.reason`` and warns (:class:`ConvergenceWarning`), or
+        raises a :class:`RuntimeError` with :obj:`strict=True`."""
         check_choice(cycle, 'cycle', CYCLES)
         check_choice(criterion, 'criterion', CRITERIA)
+        tol = check_positive_float(tol, 'tol')
+        max_iter = check_positive_int(max_iter, 'max_iter')
+        pre = check_positive_int(pre, 'pre', minimum=0)
+        post = check_positive_int(post, 'post', minimum=0)
+        if pre + post == 0:
+            raise ValueError("'pre' and 'post' are both 0: a cycle needs at "
+                             "least one smoothing sweep")
         levels = self.setup(A)
         n = levels.A[0].shape[0]
         use_torch = isinstance(b, torch.Tensor)
@@ -271,6 +315,17 @@ class GravoMG:
                 raise ValueError("'mass' must hold one positive value per "
                                  "point")
             weight = 1.0 / mass
+        if x0 is not None:
+            if tuple(x0.shape if hasattr(x0, 'shape') else
+                     np.shape(x0)) != tuple(b.shape):
+                raise ValueError(f"'x0' must have the shape of 'b', "
+                                 f"{tuple(b.shape)}, got "
+                                 f"{tuple(np.shape(x0))}")
+            x0_finite = bool(torch.isfinite(x0).all()) \
+                if isinstance(x0, torch.Tensor) \
+                else bool(np.isfinite(np.asarray(x0, dtype=np.float64)).all())
+            if not x0_finite:
+                raise ValueError("'x0' holds NaN or infinite entries")
         start = time.perf_counter()
         info = self.info
         B = b.reshape(n, -1)
@@ -320,9 +375,6 @@ class GravoMG:
                     return (B[:, 0] - matvec(A0, X[:, 0]))[:, None]
                 return np.stack([B[:, k] - matvec(A0, X[:, k])
                                  for k in range(X.shape[1])], 1)
-        if x0 is not None and X.shape != B.shape:
-            raise ValueError(f"'x0' must have the shape of 'b', "
-                             f"{tuple(b.shape)}")
         b_norm = norms(B)
         b_norm[b_norm == 0] = 1.0  # a zero column stays zero
         for _ in range(max_iter):
@@ -343,6 +395,17 @@ class GravoMG:
                 info.converged = True
                 break
         info.solve_time = time.perf_counter() - start
+        if not info.converged:
+            info.reason = (f"stopped at max_iter={max_iter} cycles with "
+                           f"{criterion} residual {info.residuals[-1]:.3g} "
+                           f"above tol={tol:g}; raise max_iter, or use the "
+                           f"hierarchy as a preconditioner for conjugate "
+                           f"gradients (as_preconditioner)")
+            if strict:
+                raise RuntimeError(f"GravoMG.solve did not converge: "
+                                   f"{info.reason}")
+            warnings.warn(f"GravoMG.solve did not converge: {info.reason}",
+                          ConvergenceWarning, stacklevel=2)
         return X.reshape(b.shape)
 
     def _torch_levels(self, levels: _Levels, device, dtype) -> TorchLevels:

@@ -4,7 +4,6 @@ matrices, smoothing :math:`(M + \alpha S + \beta S M^{-1} S) x = M y` and
 the screened Poisson problem :math:`(S + \eta M) x = M y`."""
 import math
 import numbers
-import warnings
 from typing import Optional, Tuple
 
 import numpy as np
@@ -13,10 +12,10 @@ import torch
 from torch import Tensor
 
 from tg_intrinsic.geometry import cotan_laplacian, lumped_mass, to_scipy
-from tg_intrinsic.geometry._checks import check_points
+from tg_intrinsic.geometry.checks import check_points
 from tg_intrinsic.geometry.mesh import edge_face_counts
 from tg_intrinsic.solvers.gravo_mg import GravoMG
-from tg_intrinsic.transforms.gravo_hierarchy import GravoHierarchy
+from tg_intrinsic.surface_attributes import surface_graph
 
 
 def uses_robust_laplacian(data, robust: Optional[bool] = None) -> bool:
@@ -73,18 +72,14 @@ def _solve(data, matrix, mass, y, solver, tol, ratio, lower_bound, cycle,
     if not np.isfinite(values).all():
         raise ValueError("'y' holds NaN or infinite values")
     if solver is None:
-        if 'prolong_index_1' not in data:
-            data = GravoHierarchy(ratio=ratio, lower_bound=lower_bound)(data)
-        solver = GravoMG.from_data(data)
+        solver = (GravoMG.from_data(data) if 'prolong_index_1' in data
+                  else GravoMG.from_points(data.pos, surface_graph(data),
+                                           ratio=ratio,
+                                           lower_bound=lower_bound))
     # All channels at once: one block solve, so solver.info describes it.
+    # Not converging warns there (ConvergenceWarning).
     rhs = mass[:, None] * values.reshape(mass.size, -1)
     out = solver.solve(matrix, rhs, tol=tol, cycle=cycle, max_iter=max_iter)
-    info = solver.info
-    if not info.converged:
-        warnings.warn(f"Gravo MG stopped after {info.iterations} cycles at "
-                      f"a relative residual of {info.residuals[-1]:.3g}, "
-                      f"above tol={tol:g}; allow more cycles (max_iter) or "
-                      f"a larger tolerance", RuntimeWarning, stacklevel=3)
     return torch.from_numpy(out.reshape(values.shape)).to(y.dtype).to(
         y.device)
 
@@ -115,11 +110,12 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
     the bi-Laplacian term damps high frequencies like
     :math:`\beta \lambda^2` instead of :math:`\alpha \lambda`, keeping more
     of the low ones. All :math:`C` channels are solved as one block with
-    Gravo MG on the hierarchy of ``data`` (built with
-    :class:`~tg_intrinsic.transforms.GravoHierarchy` with :obj:`ratio`
-    and :obj:`lower_bound` when absent) or with the given :obj:`solver`,
+    Gravo MG on the hierarchy of ``data`` (the levels of
+    :class:`~tg_intrinsic.transforms.GravoHierarchy` if present, else built
+    on :func:`~tg_intrinsic.surface_attributes.surface_graph` with
+    :obj:`ratio` and :obj:`lower_bound`) or with the given :obj:`solver`,
     whose :attr:`~GravoMG.info` then describes the whole solve. A solve
-    that does not reach :obj:`tol` warns.
+    that does not reach :obj:`tol` warns (:class:`ConvergenceWarning`).
 
     Args:
         data (Data): ``pos`` :math:`(N, 3)`, ``face`` :math:`(3, F)` for a

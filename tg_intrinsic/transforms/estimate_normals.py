@@ -2,7 +2,8 @@ from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
-from tg_intrinsic.geometry import estimate_normals, vertex_normals
+from tg_intrinsic.surface_attributes import (computed_normals,
+                                             resolve_normals)
 
 
 @functional_transform('estimate_normals')
@@ -20,7 +21,9 @@ class EstimateNormals(BaseTransform):
     Args:
         k (int, optional): Neighbours for point clouds. (default: :obj:`10`)
         overwrite (bool, optional): Replace normals that are already present
-            in ``data.normal`` or ``data.norm``. (default: :obj:`False`)
+            (``data.frame``, ``data.normal`` or ``data.norm``, see
+            :func:`~tg_intrinsic.surface_attributes.resolve_normals`).
+            (default: :obj:`False`)
     """
     def __init__(self, k: int = 10, overwrite: bool = False):
         self.k = k
@@ -30,17 +33,8 @@ class EstimateNormals(BaseTransform):
         if getattr(data, 'pos', None) is None:
             raise ValueError("EstimateNormals needs 'data.pos'")
         data = data.clone()
-        existing = getattr(data, 'normal', None)
-        if existing is None:
-            existing = getattr(data, 'norm', None)
-        if existing is not None and not self.overwrite:
-            data.normal = existing
-            return data
-        if getattr(data, 'face', None) is not None:
-            data.normal = vertex_normals(data.pos, data.face)
-        else:
-            data.normal = estimate_normals(data.pos, self.k,
-                                           getattr(data, 'batch', None))
+        data.normal = (computed_normals(data, self.k) if self.overwrite
+                       else resolve_normals(data, self.k))
         return data
 
     def __repr__(self) -> str:

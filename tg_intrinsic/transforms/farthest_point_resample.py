@@ -7,7 +7,7 @@ from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry import fps, mesh_edges
-from tg_intrinsic.geometry.voronoi import graph_voronoi
+from tg_intrinsic.geometry.multigrid.voronoi import graph_voronoi
 from tg_intrinsic.transforms._mesh_ops import (check_mesh_data, compact,
                                               component_labels,
                                               fan_triangulate,

@@ -6,36 +6,16 @@ from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry import tangent_frames
-from tg_intrinsic.geometry._checks import (check_points,
-                                           check_positive_float,
-                                           check_positive_int, check_vectors)
-from tg_intrinsic.geometry.brdf import reflect, to_local
-from tg_intrinsic.geometry.envmap import (check_envmap, equirect_lookup,
-                                          filter_envmap, irradiance)
-from tg_intrinsic.geometry.frames import check_frames
-from tg_intrinsic.geometry.sh import (fibonacci_sphere, fit_sh,
-                                      num_coefficients, real_sh)
-
-
-def light_directions(num_samples: int, dtype=torch.float64, device=None):
-    """The local sample directions of the incoming light (a Fibonacci
-    sphere), shared by every point."""
-    return fibonacci_sphere(num_samples, dtype=dtype, device=device)
-
-
-def light_fit_matrix(directions, l_max: int, regularizer: float):
-    r"""The regularised, cosine-weighted least-squares operator
-    :math:`(Y^\top W Y + \lambda \operatorname{diag}(e^l))^{-1} Y^\top W`
-    with :math:`W = \max(0, \cos\theta)`, :math:`(K, S)`, the same for
-    every point. Only the upper hemisphere is fitted; the lower one is left
-    to the regulariser, which continues the light smoothly (cutting it to
-    zero at the horizon would ring through every degree instead)."""
-    Y = real_sh(directions, l_max)
-    weights = directions[:, 2].clamp_min(0).unsqueeze(-1)
-    l = torch.arange(l_max + 1, dtype=Y.dtype, device=Y.device)  # noqa: E741
-    l = l.repeat_interleave(2 * l.long() + 1)
-    gram = (Y * weights).t() @ Y + regularizer * torch.diag(l.exp())
-    return torch.linalg.solve(gram, (Y * weights).t())
+from tg_intrinsic.geometry.appearance.brdf import reflect, to_local
+from tg_intrinsic.geometry.appearance.envmap import (check_envmap,
+                                                     equirect_lookup,
+                                                     filter_envmap, irradiance)
+from tg_intrinsic.geometry.appearance.sh import (fit_sh, light_directions,
+                                                 light_fit_matrix,
+                                                 num_coefficients)
+from tg_intrinsic.geometry.checks import (check_frames, check_points,
+                                          check_positive_float,
+                                          check_positive_int, check_vectors)
 
 
 @functional_transform('fit_spherical_harmonics')
@@ -122,7 +102,7 @@ class FitSphericalHarmonics(BaseTransform):
         if envmap is None:
             raise ValueError("FitSphericalHarmonics needs the lighting as "
                              "'data.envmap' [H, W, 3] (equirectangular, "
-                             "z up; see tg_intrinsic.geometry.envmap)")
+                             "z up; see tg_intrinsic.geometry.appearance.envmap)")
         envmap = check_envmap(envmap).to(pos.device, pos.dtype)
         for key in ('obs_radiance', 'obs_dir', 'obs_mask'):
             if getattr(data, key, None) is None:

@@ -4,10 +4,10 @@ from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.data import IntrinsicData
-from tg_intrinsic.geometry import knn
-from tg_intrinsic.geometry._checks import (check_edge_index, check_faces,
-                                           check_points, check_positive_int)
-from tg_intrinsic.geometry.gravo import check_options, gravo_hierarchy
+from tg_intrinsic.geometry.checks import check_points, check_positive_int
+from tg_intrinsic.geometry.multigrid.gravo import (check_options,
+                                                   gravo_hierarchy)
+from tg_intrinsic.surface_attributes import surface_graph
 
 
 @functional_transform('gravo_hierarchy')
@@ -82,21 +82,7 @@ class GravoHierarchy(BaseTransform):
 
     def forward(self, data: Data) -> IntrinsicData:
         pos = check_points(data.pos)
-        face = getattr(data, 'face', None)
-        if face is not None:
-            face = check_faces(face, pos.size(0), pos)
-            graph = torch.cat([face[[0, 1]], face[[1, 2]], face[[2, 0]]], 1)
-        elif getattr(data, 'edge_index', None) is not None:
-            graph = check_edge_index(data.edge_index, pos.size(0), pos)
-        else:
-            graph = knn(pos, min(self.k, pos.size(0) - 1))
-        used = torch.zeros(pos.size(0), dtype=torch.bool, device=pos.device)
-        used[graph.flatten()] = True
-        if not bool(used.all()):
-            bad = (~used).nonzero().flatten()
-            raise ValueError(f"{bad.numel()} point(s) are on no edge (first: "
-                             f"{bad[:5].tolist()}), so no level can reach "
-                             f"them; remove unreferenced vertices first")
+        graph = surface_graph(data, self.k)
         levels = gravo_hierarchy(
             pos.detach().cpu().double().numpy(), graph.cpu().numpy(),
             self.ratio, self.lower_bound, self.max_levels, self.shift,

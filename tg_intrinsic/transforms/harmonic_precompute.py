@@ -4,7 +4,7 @@ from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
-from tg_intrinsic.geometry.harmonic import harmonic_terms
+from tg_intrinsic.geometry.geodesics.harmonic import harmonic_terms
 
 
 @functional_transform('harmonic_precompute')

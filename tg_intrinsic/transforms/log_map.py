@@ -6,28 +6,10 @@ from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry import (geodesic_neighbourhoods, log_map,
-                                   tangent_frames, vertex_area_weights,
-                                   vertex_normals)
-from tg_intrinsic.geometry.logmap import (MAX_DISC_MEMORY, METHODS,
-                                          hsn_bytes_per_edge)
-
-
-def surface_frames(data: Data) -> torch.Tensor:
-    """``data.frame`` if given, else frames from the normals (``normal`` /
-    ``norm``), else from the vertex normals of a mesh."""
-    frame = getattr(data, 'frame', None)
-    if frame is not None:
-        return frame
-    normal = getattr(data, 'normal', None)
-    if normal is None:
-        normal = getattr(data, 'norm', None)
-    if normal is None:
-        if getattr(data, 'face', None) is None:
-            raise ValueError("a point cloud needs normals ('data.normal') or "
-                             "frames ('data.frame'); add EstimateNormals() "
-                             "or TangentFrames() before this transform")
-        normal = vertex_normals(data.pos, data.face)
-    return tangent_frames(normal)
+                                   vertex_area_weights)
+from tg_intrinsic.geometry.geodesics.logmap import (MAX_DISC_MEMORY, METHODS,
+                                                    hsn_bytes_per_edge)
+from tg_intrinsic.surface_attributes import resolve_frames
 
 
 @functional_transform('log_map')
@@ -48,7 +30,9 @@ class LogMap(BaseTransform):
     Voronoi area on point clouds), ``logmap_radius`` and ``frame``. With
     :obj:`transport=True` it also writes ``transport``, the angle
     :math:`\phi_{ji}` of :class:`ParallelTransport`, from the same solve.
-    ``data.frame`` is used as given if present.
+    Frames are found by :func:`~tg_intrinsic.surface_attributes.
+    resolve_frames`: ``data.frame`` as given, else from ``data.normal``,
+    else vertex normals of a mesh, else estimated normals of a point cloud.
 
     Args:
         radius (float): Disc radius :math:`\epsilon` (0.2 on unit-area
@@ -67,18 +51,18 @@ class LogMap(BaseTransform):
             the Harmonic Surface Network precomputation may take (the disc
             graph, log map, transport, harmonic terms with 6 rings and
             orders 0 and 1, and the coarser level, estimated as :math:`E`
-            times :func:`~tg_intrinsic.geometry.logmap.hsn_bytes_per_edge`,
+            times :func:`~tg_intrinsic.geometry.geodesics.logmap.hsn_bytes_per_edge`,
             155 bytes in float32). The number of edges :math:`E` is
             estimated before any heavy work; above the limit a
             :class:`ValueError` says what would fit (a smaller radius, fewer
             points with :class:`Decimate` or :class:`FarthestPointResample`,
             or :obj:`max_neighbors`), above a quarter of it a warning is
             issued. :obj:`None` disables the check. (default: 2 GiB,
-            :data:`~tg_intrinsic.geometry.logmap.MAX_DISC_MEMORY`)
+            :data:`~tg_intrinsic.geometry.geodesics.logmap.MAX_DISC_MEMORY`)
 
     Shapes:
         - **input:** ``pos`` :math:`(N, 3)` and ``face`` :math:`(3, F)`, or
-          ``normal`` / ``frame`` for point clouds
+          a point cloud (``normal`` / ``frame`` optional)
         - **output:** ``edge_index`` :math:`(2, E)`, ``logmap``
           :math:`(E, 2)`, ``transport`` :math:`(E)`, ``area`` :math:`(N)`,
           ``frame`` :math:`(N, 3, 3)`
@@ -101,7 +85,7 @@ class LogMap(BaseTransform):
     def forward(self, data: Data) -> Data:
         data = data.clone()
         face = getattr(data, 'face', None)
-        frame = surface_frames(data)
+        frame = resolve_frames(data)
         edge_index, _ = geodesic_neighbourhoods(
             data.pos, self.radius, face=face, normal=frame[:, 2],
             max_neighbors=self.max_neighbors, max_memory=self.max_memory,

@@ -2,7 +2,8 @@ from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
-from tg_intrinsic.geometry.mls import build_mls_operators
+from tg_intrinsic.geometry.pointcloud.mls import build_mls_operators
+from tg_intrinsic.surface_attributes import mls_parameters, resolve_frames
 
 
 @functional_transform('mls_operators')
@@ -15,16 +16,20 @@ class MLSOperators(BaseTransform):
     (``edge_index[0]`` the neighbour :math:`j`, ``edge_index[1]`` the centre
     :math:`i`), the per-edge weights ``data.grad_weight`` and
     ``data.div_weight`` (:math:`(E, 2)`, see
-    :func:`tg_intrinsic.geometry.mls.mls_grad_div`), and the tangent frames
-    ``data.frame`` the weights refer to:
+    :func:`tg_intrinsic.geometry.pointcloud.mls.mls_grad_div`), and the
+    tangent frames ``data.frame`` the weights refer to, and the parameters
+    they were built with, ``data.mls_parameters`` (:math:`(1, 4)`: k,
+    regularizer, kernel width, normalized), which DeltaNet models compare
+    with their own:
 
     .. math::
         (\nabla f)_i = \sum_{j} f_j \, G_{ij}, \qquad
         (\nabla \cdot X)_i = \sum_j D_{ij} \cdot X_j .
 
-    Frames come from ``data.frame`` if present, else from ``data.normal`` /
-    ``data.norm``, else from estimated normals. Because the weights live on
-    the edges, PyG batching needs nothing special.
+    Frames are found by :func:`~tg_intrinsic.surface_attributes.
+    resolve_frames` (``data.frame``, else ``data.normal``, else normals
+    estimated from 10 neighbours). Because the weights live on the edges,
+    PyG batching needs nothing special.
 
     Args:
         k (int, optional): Neighbours, the point itself included.
@@ -48,18 +53,19 @@ class MLSOperators(BaseTransform):
             raise ValueError("MLSOperators needs point positions in "
                              "'data.pos'")
         data = data.clone()
-        normal = getattr(data, 'normal', None)
-        if normal is None:
-            normal = getattr(data, 'norm', None)
         edge_index, frame, grad_weight, div_weight = build_mls_operators(
-            data.pos, self.k, getattr(data, 'batch', None), normal=normal,
-            frame=getattr(data, 'frame', None),
+            data.pos, self.k, getattr(data, 'batch', None),
+            frame=resolve_frames(data),
             kernel_width=self.kernel_width, regularizer=self.regularizer,
             normalized=self.normalized)
         data.edge_index = edge_index
         data.frame = frame
         data.grad_weight = grad_weight
         data.div_weight = div_weight
+        # A model reading these weights checks that they were built with
+        # its own parameters (one row per example once batched).
+        data.mls_parameters = mls_parameters(
+            self.k, self.regularizer, self.kernel_width, self.normalized)
         return data
 
     def __repr__(self) -> str:

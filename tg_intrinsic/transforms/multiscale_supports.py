@@ -7,11 +7,12 @@ from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry import fps, geodesic_neighbourhoods, log_map
-from tg_intrinsic.geometry.logmap import (MAX_DISC_MEMORY, METHODS,
+from tg_intrinsic.geometry.geodesics.logmap import (MAX_DISC_MEMORY, METHODS,
                                           graph_bytes_per_edge,
                                           hsn_bytes_per_edge)
-from tg_intrinsic.geometry.voronoi import graph_voronoi
-from tg_intrinsic.transforms.log_map import LogMap, surface_frames
+from tg_intrinsic.geometry.multigrid.voronoi import graph_voronoi
+from tg_intrinsic.surface_attributes import resolve_frames
+from tg_intrinsic.transforms.log_map import LogMap
 
 
 @functional_transform('multiscale_supports')
@@ -61,7 +62,7 @@ class MultiscaleSupports(BaseTransform):
             :class:`LogMap`; level :math:`l` marches from its samples over
             all the points and keeps the samples among them, so its
             estimate counts the marched edges
-            (:func:`~tg_intrinsic.geometry.logmap.graph_bytes_per_edge`)
+            (:func:`~tg_intrinsic.geometry.geodesics.logmap.graph_bytes_per_edge`)
             plus the kept fraction with their HSN data. :obj:`None`
             disables the check. (default: 2 GiB)
     """
@@ -103,7 +104,7 @@ class MultiscaleSupports(BaseTransform):
                           max_memory=self.max_memory)(data)
         data = IntrinsicData(**{k: v for k, v in data.to_dict().items()})
         pos, face = data.pos, getattr(data, 'face', None)
-        frame = surface_frames(data)
+        frame = resolve_frames(data)
         num = pos.size(0)
         # level l points as indices of the input points
         ids = torch.arange(num, device=pos.device)

@@ -3,8 +3,8 @@ from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry import log_map
-from tg_intrinsic.geometry.logmap import METHODS
-from tg_intrinsic.transforms.log_map import surface_frames
+from tg_intrinsic.geometry.geodesics.logmap import METHODS
+from tg_intrinsic.surface_attributes import resolve_frames
 
 
 @functional_transform('parallel_transport')
@@ -42,7 +42,7 @@ class ParallelTransport(BaseTransform):
             raise ValueError("ParallelTransport runs on the disc graph of "
                              "LogMap; apply LogMap(radius) first")
         data = data.clone()
-        frame = surface_frames(data)
+        frame = resolve_frames(data)
         _, _, phi = log_map(data.pos, data.edge_index, frame,
                             getattr(data, 'face', None), method=self.method)
         data.transport = phi

@@ -6,12 +6,12 @@ from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry import knn
-from tg_intrinsic.geometry._checks import (check_points,
-                                           check_positive_float,
-                                           check_tensor, check_vectors)
-from tg_intrinsic.geometry.cameras import (camera_centers, check_cameras,
-                                           project, sample_images,
-                                           splat_depth)
+from tg_intrinsic.geometry.appearance.cameras import (camera_centers, project,
+                                                      sample_images,
+                                                      splat_depth)
+from tg_intrinsic.geometry.checks import (check_cameras, check_points,
+                                          check_positive_float, check_tensor)
+from tg_intrinsic.surface_attributes import given_normals
 
 
 @functional_transform('project_views')
@@ -38,7 +38,7 @@ class ProjectViews(BaseTransform):
     :math:`\tan\theta_o` (at most 10), since neighbours on a tilted surface
     are legitimately nearer. The radiance is a
     bilinear sample of the image at :math:`\pi_v(p)`. Cameras follow the
-    OpenCV convention of :mod:`tg_intrinsic.geometry.cameras`.
+    OpenCV convention of :mod:`tg_intrinsic.geometry.appearance.cameras`.
 
     Documented behaviour on imperfect input: observations that touch a NaN
     pixel are masked out (with a warning that counts them); infinite or
@@ -80,11 +80,7 @@ class ProjectViews(BaseTransform):
 
     def forward(self, data: Data) -> Data:
         pos = check_points(data.pos, 'pos')
-        normal = getattr(data, 'normal', None)
-        if normal is None:
-            normal = getattr(data, 'norm', None)
-        if normal is not None:
-            normal = check_vectors(normal, 'normal', pos.size(0), pos)
+        normal = given_normals(data)
         images = getattr(data, 'images', None)
         if images is None:
             raise ValueError("ProjectViews needs 'data.images' [V, H, W, 3] "
@@ -99,7 +95,8 @@ class ProjectViews(BaseTransform):
                              f"radiance, got {images.dtype}; 8-bit images "
                              f"are not HDR")
         num_views = check_cameras(getattr(data, 'intrinsics', None),
-                                  getattr(data, 'extrinsics', None), pos)
+                                  getattr(data, 'extrinsics', None),
+                                  like=pos)[0].size(0)
         if images.size(0) != num_views:
             raise ValueError(f"there are {images.size(0)} images but "
                              f"{num_views} cameras")

@@ -4,10 +4,11 @@ from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
-from tg_intrinsic.geometry._checks import (check_positive_float,
+from tg_intrinsic.geometry.checks import (check_positive_float,
                                            check_positive_int)
-from tg_intrinsic.geometry.brdf import observed_spectra, spectral_uncertainty
-from tg_intrinsic.geometry.sh import torrance_sparrow_to_principled
+from tg_intrinsic.geometry.appearance.brdf import (observed_spectra,
+                                                   spectral_uncertainty)
+from tg_intrinsic.geometry.appearance.sh import torrance_sparrow_to_principled
 
 
 @functional_transform('spectral_uncertainty')
@@ -28,7 +29,7 @@ class SpectralUncertainty(BaseTransform):
     light's power), turns it into a distribution :math:`d \propto
     e^{-D/(2\sigma^2)}` and reports its normalised entropy :math:`H =
     -\sum d \log d / \log n` in :math:`[0, 1]` (see
-    :func:`~tg_intrinsic.geometry.brdf.spectral_uncertainty`). The argmax
+    :func:`~tg_intrinsic.geometry.appearance.brdf.spectral_uncertainty`). The argmax
     initialises the recovery: :math:`K_s` per channel and :math:`\alpha`,
     then :math:`K_d` from degree 0, where the observed mean is :math:`K_d
     E / \pi` plus the specular mean,
@@ -37,7 +38,7 @@ class SpectralUncertainty(BaseTransform):
         K_d = \frac{\pi\,(B_{00} - K_s L_{00})}{\sqrt{4\pi}\, E},
 
     mapped to principled parameters with
-    :func:`~tg_intrinsic.geometry.sh.torrance_sparrow_to_principled`.
+    :func:`~tg_intrinsic.geometry.appearance.sh.torrance_sparrow_to_principled`.
 
     Args:
         grid (tuple, optional): Cells ``(specular, roughness)``.

@@ -2,8 +2,7 @@ from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
-from tg_intrinsic.geometry import tangent_frames
-from tg_intrinsic.transforms.estimate_normals import EstimateNormals
+from tg_intrinsic.surface_attributes import given_normals, resolve_frames
 
 
 @functional_transform('tangent_frames')
@@ -12,9 +11,12 @@ class TangentFrames(BaseTransform):
     ``data.frame`` (functional name: :obj:`tangent_frames`).
 
     Rows are :math:`(e_u, e_v, n)` with :math:`e_u \times e_v = n`; a tangent
-    vector :math:`(a, b)` is :math:`a e_u + b e_v`. Normals come from
-    ``data.normal`` (or ``data.norm``), else they are estimated with
-    :class:`EstimateNormals`. An existing ``data.frame`` is kept.
+    vector :math:`(a, b)` is :math:`a e_u + b e_v`. An existing
+    ``data.frame`` is kept (and validated); otherwise the frames are built
+    on the normals found by :func:`~tg_intrinsic.surface_attributes.
+    resolve_normals` (``data.normal``, else mesh vertex normals, else
+    estimated), which are also written to ``data.normal`` if it was
+    empty.
 
     Args:
         k (int, optional): Neighbours for normal estimation on point clouds
@@ -27,10 +29,11 @@ class TangentFrames(BaseTransform):
         self.k = k
 
     def forward(self, data: Data) -> Data:
-        if getattr(data, 'frame', None) is not None:
-            return data
-        data = EstimateNormals(self.k)(data)
-        data.frame = tangent_frames(data.normal)
+        data = data.clone()
+        missing = given_normals(data) is None
+        data.frame = resolve_frames(data, self.k)
+        if missing:
+            data.normal = data.frame[:, 2]
         return data
 
     def __repr__(self) -> str:

@@ -4,9 +4,11 @@ import torch
 from torch import Tensor
 from torch_geometric.data import Data
 
-from tg_intrinsic.geometry.mls import build_mls_operators
-from tg_intrinsic.geometry.operators import SurfaceOperators
+from tg_intrinsic.geometry.pointcloud.mls import build_mls_operators
+from tg_intrinsic.geometry.pointcloud.operators import SurfaceOperators
 from tg_intrinsic.nn.delta_conv import DeltaConv
+from tg_intrinsic.surface_attributes import (check_mls_parameters,
+                                             resolve_frames)
 
 
 def operators_of(data: Data, k: int, regularizer: float, kernel_width: float
@@ -16,15 +18,13 @@ def operators_of(data: Data, k: int, regularizer: float, kernel_width: float
     otherwise built once here on the data's device."""
     num_nodes = data.pos.size(0)
     if getattr(data, 'grad_weight', None) is not None:
+        check_mls_parameters(data, k, regularizer, kernel_width)
         edge_index = data.edge_index
         grad_weight, div_weight = data.grad_weight, data.div_weight
     else:
-        normal = getattr(data, 'normal', None)
-        if normal is None:
-            normal = getattr(data, 'norm', None)
         edge_index, _, grad_weight, div_weight = build_mls_operators(
-            data.pos, k, getattr(data, 'batch', None), normal=normal,
-            frame=getattr(data, 'frame', None), kernel_width=kernel_width,
+            data.pos, k, getattr(data, 'batch', None),
+            frame=resolve_frames(data), kernel_width=kernel_width,
             regularizer=regularizer)
     return edge_index, SurfaceOperators(edge_index, grad_weight, div_weight,
                                         num_nodes)

@@ -32,9 +32,9 @@ from typing import Optional
 import torch
 from torch import Tensor
 
-from ._checks import check_positive_float, check_positive_int, check_tensor
+from ..checks import check_positive_float, check_positive_int, check_tensor
 # A^H is what complex autograd needs in the backward pass.
-from .operators import _SparseMM
+from ..sparse import SparseMM
 
 
 def ring_weights(r: Tensor, radius: float, rings: int) -> Tensor:
@@ -203,7 +203,7 @@ class HarmonicOperator:
         r"""``[N, P + 1, C]`` complex -> ``[N, Q, P + 1, O + 1, C]``."""
         c = x.size(-1)
         flat = x.reshape(self.num_nodes * self.in_orders, c)
-        out = _SparseMM.apply(self.matrix, self.adjoint, flat)
+        out = SparseMM.apply(self.matrix, self.adjoint, flat)
         return out.view(self.num_nodes, self.rings, self.in_orders,
                         self.out_orders, c)
 

@@ -13,8 +13,8 @@ later). Part labels index :data:`PART_NAMES`.
 """
 import numpy as np
 
-from . import _implicit as imp
-from ._decimate import decimate, self_intersections
+from . import implicit_surfaces as imp
+from .quadric_decimation import decimate, self_intersections
 
 PART_NAMES = ('body', 'head', 'proximal', 'distal', 'extremity', 'tail')
 BODY, HEAD, PROX, DIST, EXTR, TAIL = range(6)

@@ -1,10 +1,9 @@
-r"""An independent renderer for synthetic SVBRDF scenes: the full reflection
-integral of a Lambert + Torrance-Sparrow (GGX) surface under a distant
-environment map, a z-buffer triangle rasteriser and ray-cast visibility.
-Pure numpy/numba kernels behind torch-in, torch-out functions; no
-:class:`~torch_geometric.data.Data`.
+r"""The reference lighting integral for synthetic SVBRDF scenes: the full
+reflection integral of a Lambert + Torrance-Sparrow (GGX) surface under a
+distant environment map. Pure numpy/numba kernels behind torch-in,
+torch-out functions.
 
-The renderer is the ground truth for the frequency-domain SVBRDF method, so it
+It is the ground truth for the frequency-domain SVBRDF method, so it
 makes none of that method's approximations (no spherical harmonics, no lobe
 filter): the outgoing radiance is the hemispherical integral
 
@@ -17,20 +16,12 @@ filter): the outgoing radiance is the hemispherical integral
 
 with GGX :math:`D(\mathbf{h}) = \alpha^2 / (\pi ((\mathbf{n} \cdot
 \mathbf{h})^2 (\alpha^2 - 1) + 1)^2)`, the separable Smith GGX
-:math:`G_1` (:func:`~tg_intrinsic.geometry.sh.smith_g1`) and Schlick's
-:math:`F` (:func:`~tg_intrinsic.geometry.sh.schlick_fresnel`), per RGB
+:math:`G_1` (:func:`~tg_intrinsic.geometry.appearance.sh.smith_g1`) and Schlick's
+:math:`F` (:func:`~tg_intrinsic.geometry.appearance.sh.schlick_fresnel`), per RGB
 channel. It is a *direct-lighting* renderer of a *distant* environment: the
 object casts no shadow onto itself from the environment and there are no
 interreflections, so :math:`B` depends on the point only through its normal
 and material.
-
-Cameras are pinhole, OpenCV style: ``intrinsics`` :math:`K` (3, 3),
-``extrinsics`` :math:`[R \mid t]` (3, 4) world to camera,
-:math:`\mathbf{x}_c = R \mathbf{x}_w + t`, looking along :math:`+z_c`
-(:math:`x_c` right, :math:`y_c` down). A camera point projects to
-:math:`(u, v) = (f_x x/z + c_x, f_y y/z + c_y)`; the pixel in row
-:math:`i`, column :math:`j` covers :math:`u \in [j, j+1)`, :math:`v \in
-[i, i+1)` and is sampled at its centre :math:`(j + \frac12, i + \frac12)`.
 """
 import math
 
@@ -39,14 +30,12 @@ import torch
 from numba import njit, prange
 from torch import Tensor
 
-from ._checks import (check_faces, check_points, check_positive_float,
-                      check_positive_int, check_tensor)
-from .cameras import camera_centers
+from ..checks import (check_points, check_positive_int, check_seed,
+                      check_tensor, check_unit_interval, check_unit_rows)
 from .envmap import check_envmap
 from .sh import principled_to_torrance_sparrow
 
-__all__ = ['render_radiance', 'rasterize', 'point_visibility',
-           'camera_centers', 'render_images']
+__all__ = ['render_radiance']
 
 
 # ----------------------------------------------------------- small kernels
@@ -72,7 +61,7 @@ def _hash_uniform(seed, i, j, k):  # pragma: no cover (numba)
 @njit(cache=True, inline='always')
 def _env_coords(dx, dy, dz, height, width):  # pragma: no cover (numba)
     """Continuous pixel coordinates (row, col) of a unit direction, as
-    :func:`~tg_intrinsic.geometry.envmap.direction_to_equirect`."""
+    :func:`~tg_intrinsic.geometry.appearance.envmap.direction_to_equirect`."""
     z = min(1.0, max(-1.0, dz))
     theta = math.acos(z)
     phi = math.atan2(dy, dx)
@@ -83,7 +72,7 @@ def _env_coords(dx, dy, dz, height, width):  # pragma: no cover (numba)
 @njit(cache=True, inline='always')
 def _bilinear(env, row, col):  # pragma: no cover (numba)
     """Bilinear radiance at continuous pixel coordinates, exactly as
-    :func:`~tg_intrinsic.geometry.envmap.equirect_lookup` (wrapping in
+    :func:`~tg_intrinsic.geometry.appearance.envmap.equirect_lookup` (wrapping in
     azimuth, clamped at the poles)."""
     height, width = env.shape[0], env.shape[1]
     row = min(max(row - 0.5, 0.0), height - 1.0)
@@ -468,53 +457,12 @@ def _specular_kernel(normal, r0, alpha, view, mask, env, num_brdf,
     return out
 
 
-# ------------------------------------------------------------ validation
-def _check_float(value, name, shape):
-    value = check_tensor(value, name)
-    if tuple(value.shape) != tuple(shape):
-        raise ValueError(f"'{name}' must have shape {list(shape)}, got "
-                         f"{list(value.shape)}")
-    if not value.is_floating_point():
-        raise ValueError(f"'{name}' must be a float tensor, got "
-                         f"{value.dtype}")
-    if value.numel() and not bool(torch.isfinite(value).all()):
-        raise ValueError(f"'{name}' contains NaN or infinite values; "
-                         f"repair those rows first")
-    return value
-
-
-def _check_unit_rows(value, name, shape):
-    value = _check_float(value, name, shape)
-    norm = value.double().norm(dim=-1, keepdim=True)
-    if value.numel() and bool((norm <= 1e-12).any()):
-        raise ValueError(f"'{name}' has zero-length direction(s); every "
-                         f"row must be a (unit) direction")
-    return (value.double() / norm).cpu().numpy()
-
-
-def _check_unit_interval(value, name, shape):
-    value = _check_float(value, name, shape)
-    if value.numel() and bool(((value < 0) | (value > 1)).any()):
-        raise ValueError(f"'{name}' must lie in [0, 1], got values in "
-                         f"[{float(value.min()):g}, {float(value.max()):g}]"
-                         f"; clamp it first")
-    return value.double().cpu()
-
-
-def _check_seed(seed):
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) \
-            or seed < 0:
-        raise ValueError(f"'seed' must be a non-negative integer, got "
-                         f"{seed!r}")
-    return int(seed)
-
-
 def _env_numpy(envmap):
     envmap = check_envmap(envmap)
     return np.ascontiguousarray(envmap.detach().double().cpu().numpy())
 
 
-# ----------------------------------------------------------------- public
+
 def render_radiance(normal: Tensor, base_color: Tensor, metallic: Tensor,
                     roughness: Tensor, view_dirs: Tensor, envmap: Tensor,
                     specular_samples: int = 96, light_samples: int = 128,
@@ -533,7 +481,7 @@ def render_radiance(normal: Tensor, base_color: Tensor, metallic: Tensor,
 
     with :math:`K_d = b(1 - m)`, :math:`R_0 = 0.04 + (b - 0.04)m`,
     :math:`\alpha = \max(r^2, 10^{-3})`
-    (:func:`~tg_intrinsic.geometry.sh.principled_to_torrance_sparrow`).
+    (:func:`~tg_intrinsic.geometry.appearance.sh.principled_to_torrance_sparrow`).
 
     * Diffuse: a quadrature over *every* pixel :math:`p` (direction
       :math:`\omega_p`, exact solid angle :math:`\Omega_p`) of the
@@ -569,7 +517,7 @@ def render_radiance(normal: Tensor, base_color: Tensor, metallic: Tensor,
         view_dirs (torch.Tensor): Unit directions from each point towards
             each camera :math:`(N, V, 3)`.
         envmap (torch.Tensor): Equirectangular radiance :math:`(H, W, 3)`
-            (:mod:`tg_intrinsic.geometry.envmap` convention).
+            (:mod:`tg_intrinsic.geometry.appearance.envmap` convention).
         specular_samples (int, optional): Visible-normal samples per
             (point, view). (default: :obj:`96`)
         light_samples (int, optional): Environment samples per point,
@@ -595,26 +543,26 @@ def render_radiance(normal: Tensor, base_color: Tensor, metallic: Tensor,
     """
     normal_t = check_points(normal, 'normal')
     num = normal_t.size(0)
-    normal_np = _check_unit_rows(normal_t, 'normal', (num, 3))
+    normal_np = check_unit_rows(normal_t, 'normal', (num, 3))
     view_dirs = check_tensor(view_dirs, 'view_dirs')
     if view_dirs.dim() != 3 or view_dirs.size(0) != num \
             or view_dirs.size(2) != 3:
         raise ValueError(f"'view_dirs' must have shape [N, V, 3] with N = "
                          f"{num} points, got {list(view_dirs.shape)}")
     num_views = view_dirs.size(1)
-    view_np = _check_unit_rows(view_dirs, 'view_dirs',
+    view_np = check_unit_rows(view_dirs, 'view_dirs',
                                (num, num_views, 3)) \
         if view_dirs.numel() else np.zeros((num, num_views, 3))
-    base_color = _check_unit_interval(base_color, 'base_color', (num, 3))
-    metallic = _check_unit_interval(metallic, 'metallic', (num, ))
-    roughness = _check_unit_interval(roughness, 'roughness', (num, ))
+    base_color = check_unit_interval(base_color, 'base_color', (num, 3))
+    metallic = check_unit_interval(metallic, 'metallic', (num, ))
+    roughness = check_unit_interval(roughness, 'roughness', (num, ))
     env = _env_numpy(envmap)
     specular_samples = check_positive_int(specular_samples,
                                           'specular_samples')
     light_samples = check_positive_int(light_samples, 'light_samples', 0)
     diffuse_resolution = check_positive_int(diffuse_resolution,
                                             'diffuse_resolution')
-    seed = _check_seed(seed)
+    seed = check_seed(seed)
     if mask is None:
         mask_np = np.ones((num, num_views), dtype=np.bool_)
     else:
@@ -667,482 +615,3 @@ def render_radiance(normal: Tensor, base_color: Tensor, metallic: Tensor,
     if separate:
         return diffuse, specular
     return diffuse + specular
-
-
-# ------------------------------------------------------------ rasteriser
-@njit(cache=True, parallel=True)
-def _face_extents(cam, faces, K, near, height, width):  # pragma: no cover
-    """Screen extent ``(vmin, vmax, umin, umax)`` of the part of every
-    triangle in front of the near plane (the triangle clipped against
-    z = near by Sutherland-Hodgman, at most four corners, projected),
-    clamped to a margin around the image; ``vmin > vmax`` when nothing is
-    in front."""
-    num = faces.shape[0]
-    ext = np.empty((num, 4))
-    for f in prange(num):
-        umin, vmin = np.inf, np.inf
-        umax, vmax = -np.inf, -np.inf
-        count = 0
-        for e in range(3):
-            p = cam[faces[f, e]]
-            q = cam[faces[f, (e + 1) % 3]]
-            pin = p[2] >= near
-            qin = q[2] >= near
-            for which in range(2):
-                # the corner p if inside, then the crossing of edge p-q
-                if which == 0:
-                    if not pin:
-                        continue
-                    x, y, z = p[0], p[1], p[2]
-                else:
-                    if pin == qin:
-                        continue
-                    t = (near - p[2]) / (q[2] - p[2])
-                    x = p[0] + t * (q[0] - p[0])
-                    y = p[1] + t * (q[1] - p[1])
-                    z = near
-                u = (K[0, 0] * x + K[0, 1] * y) / z + K[0, 2]
-                v = (K[1, 1] * y) / z + K[1, 2]
-                umin, umax = min(umin, u), max(umax, u)
-                vmin, vmax = min(vmin, v), max(vmax, v)
-                count += 1
-        if count == 0:
-            ext[f, 0], ext[f, 1], ext[f, 2], ext[f, 3] = 1.0, 0.0, 1.0, 0.0
-            continue
-        # near-plane corners project far away: clamp before any int cast
-        ext[f, 0] = min(max(vmin, -2.0), height + 2.0)
-        ext[f, 1] = min(max(vmax, -2.0), height + 2.0)
-        ext[f, 2] = min(max(umin, -2.0), width + 2.0)
-        ext[f, 3] = min(max(umax, -2.0), width + 2.0)
-    return ext
-
-
-@njit(cache=True, parallel=True)
-def _face_boxes(cam, faces, K, near, height, width):  # pragma: no cover
-    """Inclusive pixel ranges ``(i0, i1, j0, j1)`` whose centres
-    :math:`(j + \\frac12, i + \\frac12)` may fall in each triangle's
-    extent (one pixel of slack against rounding); empty when i0 > i1."""
-    ext = _face_extents(cam, faces, K, near, height, width)
-    num = faces.shape[0]
-    box = np.empty((num, 4), dtype=np.int64)
-    for f in prange(num):
-        if ext[f, 0] > ext[f, 1]:
-            box[f, 0], box[f, 1], box[f, 2], box[f, 3] = 1, 0, 1, 0
-            continue
-        box[f, 0] = max(0, np.int64(math.floor(ext[f, 0] - 0.5)) - 1)
-        box[f, 1] = min(height - 1, np.int64(math.ceil(ext[f, 1] - 0.5)) + 1)
-        box[f, 2] = max(0, np.int64(math.floor(ext[f, 2] - 0.5)) - 1)
-        box[f, 3] = min(width - 1, np.int64(math.ceil(ext[f, 3] - 0.5)) + 1)
-    return box
-
-
-@njit(cache=True, inline='always')
-def _triple(ax, ay, az, bx, by, bz, cx, cy, cz):  # pragma: no cover
-    # a . (b x c)
-    return (ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz)
-            + az * (bx * cy - by * cx))
-
-
-@njit(cache=True, parallel=True)
-def _rasterize_kernel(cam, faces, K, Kinv, near, height,
-                      width):  # pragma: no cover (numba)
-    """Ray casting through pixel centres with a z-buffer. A ray
-    :math:`t\\,\\mathbf{d}` hits triangle (a, b, c) iff the coefficients of
-    :math:`\\mathbf{d}` in the basis (a, b, c) are all >= 0; normalised,
-    they are the barycentrics of the hit, and the hit depth is
-    :math:`d_z / \\sum`. Triangles behind the camera have no such hit, so
-    nothing wraps around. Rows are split into bands, one thread each,
-    faces in index order: ties go to the lower face index,
-    deterministically."""
-    box = _face_boxes(cam, faces, K, near, height, width)
-    face_id = np.full((height, width), -1, dtype=np.int64)
-    depth = np.full((height, width), np.inf)
-    bary = np.zeros((height, width, 3))
-    band = 8
-    num_bands = (height + band - 1) // band
-    for b in prange(num_bands):
-        r_lo = b * band
-        r_hi = min(height, r_lo + band) - 1
-        for f in range(faces.shape[0]):
-            i0 = max(box[f, 0], r_lo)
-            i1 = min(box[f, 1], r_hi)
-            if i0 > i1:
-                continue
-            a = cam[faces[f, 0]]
-            bb = cam[faces[f, 1]]
-            c = cam[faces[f, 2]]
-            det = _triple(a[0], a[1], a[2], bb[0], bb[1], bb[2], c[0], c[1],
-                          c[2])
-            scale = (a[0] ** 2 + a[1] ** 2 + a[2] ** 2) ** 1.5 + \
-                (bb[0] ** 2 + bb[1] ** 2 + bb[2] ** 2) ** 1.5 + \
-                (c[0] ** 2 + c[1] ** 2 + c[2] ** 2) ** 1.5
-            if abs(det) <= 1e-14 * scale:
-                continue  # seen edge-on, or degenerate
-            inv = 1.0 / det
-            for i in range(i0, i1 + 1):
-                for j in range(box[f, 2], box[f, 3] + 1):
-                    u, v = j + 0.5, i + 0.5
-                    dx = Kinv[0, 0] * u + Kinv[0, 1] * v + Kinv[0, 2]
-                    dy = Kinv[1, 1] * v + Kinv[1, 2]
-                    wa = _triple(dx, dy, 1.0, bb[0], bb[1], bb[2], c[0],
-                                 c[1], c[2]) * inv
-                    if wa < 0.0:
-                        continue
-                    wb = _triple(dx, dy, 1.0, c[0], c[1], c[2], a[0], a[1],
-                                 a[2]) * inv
-                    if wb < 0.0:
-                        continue
-                    wc = _triple(dx, dy, 1.0, a[0], a[1], a[2], bb[0],
-                                 bb[1], bb[2]) * inv
-                    if wc < 0.0:
-                        continue
-                    total = wa + wb + wc
-                    if total <= 0.0:
-                        continue
-                    z = 1.0 / total
-                    if z < near:
-                        continue
-                    if z < depth[i, j] or (z == depth[i, j]
-                                           and f < face_id[i, j]):
-                        depth[i, j] = z
-                        face_id[i, j] = f
-                        bary[i, j, 0] = wa * z
-                        bary[i, j, 1] = wb * z
-                        bary[i, j, 2] = wc * z
-    return face_id, bary, depth
-
-
-@njit(cache=True, parallel=True)
-def _visibility_kernel(cam, faces, K, near, height, width, points,
-                       rel_tol):  # pragma: no cover (numba)
-    """Ray casting from the camera centre to every point: occluded iff the
-    ray hits a triangle strictly before the point (coefficient sum > 1 +
-    tol; the point's own triangles give exactly 1). Candidate triangles
-    come from a screen grid (about F / 2 cells, finer than the pixels for
-    fine meshes) holding every triangle whose clipped extent overlaps the
-    cell."""
-    ext = _face_extents(cam, faces, K, near, height, width)
-    num_faces = faces.shape[0]
-    # about two triangles per cell when they cover the image evenly
-    side = max(1, np.int64(math.sqrt(num_faces / 2.0)))
-    gh = min(side, 4 * height)
-    gw = min(side, 4 * width)
-    sy = gh / height
-    sx = gw / width
-    lo = np.empty((num_faces, 4), dtype=np.int64)
-    for f in range(num_faces):
-        if ext[f, 0] > ext[f, 1] or ext[f, 2] > ext[f, 3] \
-                or ext[f, 1] < 0 or ext[f, 0] > height \
-                or ext[f, 3] < 0 or ext[f, 2] > width:
-            lo[f, 0], lo[f, 1] = 1, 0
-            continue
-        # one cell of slack against rounding
-        lo[f, 0] = max(0, np.int64(math.floor(ext[f, 0] * sy)) - 1)
-        lo[f, 1] = min(gh - 1, np.int64(math.floor(ext[f, 1] * sy)) + 1)
-        lo[f, 2] = max(0, np.int64(math.floor(ext[f, 2] * sx)) - 1)
-        lo[f, 3] = min(gw - 1, np.int64(math.floor(ext[f, 3] * sx)) + 1)
-    count = np.zeros(gh * gw + 1, dtype=np.int64)
-    for f in range(num_faces):
-        if lo[f, 0] > lo[f, 1]:
-            continue
-        for gi in range(lo[f, 0], lo[f, 1] + 1):
-            for gj in range(lo[f, 2], lo[f, 3] + 1):
-                count[gi * gw + gj + 1] += 1
-    for g in range(gh * gw):
-        count[g + 1] += count[g]
-    fill = count[:-1].copy()
-    entries = np.empty(count[-1], dtype=np.int64)
-    for f in range(num_faces):
-        if lo[f, 0] > lo[f, 1]:
-            continue
-        for gi in range(lo[f, 0], lo[f, 1] + 1):
-            for gj in range(lo[f, 2], lo[f, 3] + 1):
-                entries[fill[gi * gw + gj]] = f
-                fill[gi * gw + gj] += 1
-    num = points.shape[0]
-    visible = np.zeros(num, dtype=np.bool_)
-    limit = 1.0 + rel_tol
-    for k in prange(num):
-        px, py, pz = points[k, 0], points[k, 1], points[k, 2]
-        if pz < near:
-            continue
-        u = (K[0, 0] * px + K[0, 1] * py) / pz + K[0, 2]
-        v = K[1, 1] * py / pz + K[1, 2]
-        if not (u >= 0.0 and u < width and v >= 0.0 and v < height):
-            continue
-        gi = min(np.int64(v * sy), gh - 1)
-        gj = min(np.int64(u * sx), gw - 1)
-        g = gi * gw + gj
-        hidden = False
-        for e in range(count[g], count[g + 1]):
-            f = entries[e]
-            a = cam[faces[f, 0]]
-            b = cam[faces[f, 1]]
-            c = cam[faces[f, 2]]
-            det = _triple(a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1],
-                          c[2])
-            if det == 0.0:
-                continue
-            wa = _triple(px, py, pz, b[0], b[1], b[2], c[0], c[1], c[2]) \
-                / det
-            wb = _triple(px, py, pz, c[0], c[1], c[2], a[0], a[1], a[2]) \
-                / det
-            wc = _triple(px, py, pz, a[0], a[1], a[2], b[0], b[1], b[2]) \
-                / det
-            if wa < 0.0 or wb < 0.0 or wc < 0.0:
-                continue
-            total = wa + wb + wc
-            # hit at depth pz / total: in front of the point, behind the
-            # near plane
-            if total > limit and pz >= near * total:
-                hidden = True
-                break
-        visible[k] = not hidden
-    return visible
-
-
-def _check_cameras(intrinsics, extrinsics, batched: bool):
-    """Validates pinhole cameras; returns float64 numpy (V, 3, 3) and
-    (V, 3, 4)."""
-    intrinsics = check_tensor(intrinsics, 'intrinsics')
-    extrinsics = check_tensor(extrinsics, 'extrinsics')
-    want_k, want_e = ([-1, 3, 3], [-1, 3, 4]) if batched else ([3, 3],
-                                                              [3, 4])
-    ok_k = intrinsics.dim() == len(want_k) and \
-        list(intrinsics.shape[-2:]) == [3, 3]
-    ok_e = extrinsics.dim() == len(want_e) and \
-        list(extrinsics.shape[-2:]) == [3, 4]
-    names = '[V, 3, 3] and [V, 3, 4]' if batched else '[3, 3] and [3, 4]'
-    if not (ok_k and ok_e) or (batched and intrinsics.size(0)
-                               != extrinsics.size(0)):
-        raise ValueError(f"'intrinsics' and 'extrinsics' must have shapes "
-                         f"{names}, got {list(intrinsics.shape)} and "
-                         f"{list(extrinsics.shape)}")
-    for name, value in (('intrinsics', intrinsics),
-                        ('extrinsics', extrinsics)):
-        if not value.is_floating_point():
-            raise ValueError(f"'{name}' must be a float tensor, got "
-                             f"{value.dtype}")
-        if not bool(torch.isfinite(value).all()):
-            raise ValueError(f"'{name}' contains NaN or infinite values")
-    K = intrinsics.detach().double().cpu().numpy().reshape(-1, 3, 3)
-    E = extrinsics.detach().double().cpu().numpy().reshape(-1, 3, 4)
-    lower = np.stack([K[:, 1, 0], K[:, 2, 0], K[:, 2, 1]], 1)
-    if np.any(lower != 0) or np.any(K[:, 2, 2] != 1) \
-            or np.any(K[:, 0, 0] <= 0) or np.any(K[:, 1, 1] <= 0):
-        raise ValueError("'intrinsics' must be pinhole matrices [[fx, s, "
-                         "cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
-    R = E[:, :, :3]
-    error = np.abs(np.einsum('vij,vkj->vik', R, R) - np.eye(3)).max((1, 2))
-    if np.any(error > 1e-4) or np.any(np.linalg.det(R) < 0):
-        bad = np.nonzero((error > 1e-4) | (np.linalg.det(R) < 0))[0]
-        raise ValueError(f"'extrinsics' must be world-to-camera [R | t] "
-                         f"with R a rotation; camera(s) {bad[:5].tolist()} "
-                         f"are not (re-orthonormalise R)")
-    return K, E
-
-
-def _check_image_size(height, width):
-    return (check_positive_int(height, 'height'),
-            check_positive_int(width, 'width'))
-
-
-def _mesh_numpy(vertices, faces):
-    vertices = check_points(vertices, 'vertices')
-    faces = check_faces(faces, vertices.size(0), vertices)
-    return (np.ascontiguousarray(vertices.detach().double().cpu().numpy()),
-            np.ascontiguousarray(faces.t().cpu().numpy()))
-
-
-def _to_camera(points, E):
-    return np.ascontiguousarray(points @ E[:3, :3].T + E[:3, 3])
-
-
-def rasterize(vertices: Tensor, faces: Tensor, intrinsics: Tensor,
-              extrinsics: Tensor, height: int, width: int,
-              near: float = 1e-6):
-    r"""Z-buffer rasterisation of a triangle mesh by one pinhole camera,
-    sampled at pixel centres: pixel :math:`(i, j)` shows the nearest
-    triangle hit by the ray through :math:`(u, v) = (j + \frac12, i +
-    \frac12)`, i.e. through :math:`\mathbf{d} = K^{-1}(u, v, 1)^\top`.
-
-    .. math::
-        \mathbf{d} = \beta_a \mathbf{a} + \beta_b \mathbf{b} + \beta_c
-        \mathbf{c}, \quad \text{hit iff } \beta \ge 0, \quad
-        \lambda = \beta / \textstyle\sum \beta, \quad
-        z = d_z / \textstyle\sum \beta,
-
-    with :math:`\mathbf{a}, \mathbf{b}, \mathbf{c}` the corners in camera
-    coordinates: :math:`\lambda` are the barycentrics of the 3D hit point
-    (perspective correct) and :math:`z` its camera depth. Only hits with
-    :math:`z \ge` :obj:`near` count, so triangles crossing or behind the
-    camera plane are clipped, never wrapped around. Pixels whose centre
-    lies exactly on a shared edge go to the nearer triangle, then to the
-    lower face index. Numba, parallel over bands of rows.
-
-    Args:
-        vertices (torch.Tensor): World positions :math:`(n, 3)`.
-        faces (torch.Tensor): Triangles :math:`(3, F)` (PyG layout, long).
-        intrinsics (torch.Tensor): :math:`K` :math:`(3, 3)`.
-        extrinsics (torch.Tensor): World to camera :math:`[R \mid t]`
-            :math:`(3, 4)`.
-        height (int): Image rows.
-        width (int): Image columns.
-        near (float, optional): Near-plane depth. (default: :obj:`1e-6`)
-
-    Returns:
-        ``(face_id, barycentrics, depth)``: long :math:`(H, W)` with -1 on
-        the background, :math:`(H, W, 3)` and :math:`(H, W)` (``inf`` on
-        the background), float64. A camera that sees nothing gives an
-        empty image, not an error.
-    """
-    V, F = _mesh_numpy(vertices, faces)
-    K, E = _check_cameras(intrinsics, extrinsics, batched=False)
-    height, width = _check_image_size(height, width)
-    near = check_positive_float(near, 'near')
-    face_id, bary, depth = _rasterize_kernel(
-        _to_camera(V, E[0]), F, K[0], np.linalg.inv(K[0]), near, height,
-        width)
-    return (torch.from_numpy(face_id), torch.from_numpy(bary),
-            torch.from_numpy(depth))
-
-
-def point_visibility(points: Tensor, vertices: Tensor, faces: Tensor,
-                     intrinsics: Tensor, extrinsics: Tensor, height: int,
-                     width: int, near: float = 1e-6,
-                     rel_tol: float = 1e-6) -> Tensor:
-    r"""Which points each camera sees: the point projects inside the image,
-    lies in front of the near plane, and the segment from the camera centre
-    to it crosses no triangle of the mesh before it (exact ray casting, not
-    a depth-buffer comparison: a hit at camera depth below :math:`z_p /
-    (1 + \epsilon)` occludes, with :math:`\epsilon` = :obj:`rel_tol`, so
-    the point's own triangles never hide it). The orientation of the
-    surface is not considered: test :math:`\mathbf{n} \cdot \omega_o > 0`
-    separately.
-
-    Args:
-        points (torch.Tensor): World positions :math:`(N, 3)`, usually on
-            the mesh.
-        vertices (torch.Tensor): Mesh positions :math:`(n, 3)`.
-        faces (torch.Tensor): Triangles :math:`(3, F)`.
-        intrinsics (torch.Tensor): :math:`(V, 3, 3)`.
-        extrinsics (torch.Tensor): :math:`(V, 3, 4)`.
-        height (int): Image rows.
-        width (int): Image columns.
-        near (float, optional): Near-plane depth. (default: :obj:`1e-6`)
-        rel_tol (float, optional): :math:`\epsilon`. (default: :obj:`1e-6`)
-
-    Returns:
-        Bool :math:`(N, V)`; a camera that sees no point gives a column of
-        :obj:`False`, not an error.
-    """
-    P = check_points(points, 'points').detach().double().cpu().numpy()
-    V, F = _mesh_numpy(vertices, faces)
-    K, E = _check_cameras(intrinsics, extrinsics, batched=True)
-    height, width = _check_image_size(height, width)
-    near = check_positive_float(near, 'near')
-    rel_tol = check_positive_float(rel_tol, 'rel_tol')
-    out = np.zeros((P.shape[0], K.shape[0]), dtype=np.bool_)
-    for v in range(K.shape[0]):  # each call is parallel inside
-        out[:, v] = _visibility_kernel(_to_camera(V, E[v]), F, K[v], near,
-                                       height, width, _to_camera(P, E[v]),
-                                       rel_tol)
-    return torch.from_numpy(out)
-
-
-def render_images(vertices: Tensor, faces: Tensor, vertex_normals: Tensor,
-                  base_color: Tensor, metallic: Tensor, roughness: Tensor,
-                  intrinsics: Tensor, extrinsics: Tensor, height: int,
-                  width: int, envmap: Tensor, specular_samples: int = 16,
-                  light_samples: int = 16, diffuse_resolution: int = 256,
-                  seed: int = 0) -> Tensor:
-    r"""Images of a mesh with per-vertex principled materials under a
-    distant environment map: :func:`rasterize` every view, interpolate
-    position, normal (renormalised) and material with the perspective
-    correct barycentrics of the pixel centre's hit, and shade it towards
-    the camera centre with :func:`render_radiance`,
-
-    .. math::
-        I_v(i, j) = B\big(\mathbf{n}(\mathbf{x}),
-        \tfrac{\mathbf{c}_v - \mathbf{x}}{\|\mathbf{c}_v - \mathbf{x}\|}
-        \big), \quad \mathbf{x} = \textstyle\sum_k \lambda_k
-        \mathbf{p}_k.
-
-    One sample per pixel (no anti-aliasing); the background is 0, and so
-    is a pixel whose interpolated normal faces away from the camera (a thin
-    rim at silhouettes of smooth-shaded meshes). Every pixel gets its own
-    lattice shifts, so the specular noise is independent between pixels;
-    the defaults are coarser than :func:`render_radiance`'s because there
-    are many pixels, and the diffuse irradiance comes from a table over
-    normals (``irradiance_table=True``).
-
-    Args:
-        vertices (torch.Tensor): :math:`(n, 3)`.
-        faces (torch.Tensor): :math:`(3, F)`.
-        vertex_normals (torch.Tensor): :math:`(n, 3)`.
-        base_color (torch.Tensor): :math:`(n, 3)`.
-        metallic (torch.Tensor): :math:`(n)`.
-        roughness (torch.Tensor): :math:`(n)`.
-        intrinsics (torch.Tensor): :math:`(V, 3, 3)`.
-        extrinsics (torch.Tensor): :math:`(V, 3, 4)`.
-        height (int): Image rows.
-        width (int): Image columns.
-        envmap (torch.Tensor): :math:`(H_e, W_e, 3)`.
-        specular_samples (int, optional): See :func:`render_radiance`.
-            (default: :obj:`16`)
-        light_samples (int, optional): See :func:`render_radiance` (per
-            pixel here). (default: :obj:`16`)
-        diffuse_resolution (int, optional): See :func:`render_radiance`.
-            (default: :obj:`256`)
-        seed (int, optional): Seed of the lattice shifts.
-            (default: :obj:`0`)
-
-    Returns:
-        float32 :math:`(V, H, W, 3)` linear radiance.
-    """
-    Vt = check_points(vertices, 'vertices')
-    n = Vt.size(0)
-    V, F = _mesh_numpy(Vt, faces)
-    normal = _check_unit_rows(vertex_normals, 'vertex_normals', (n, 3))
-    base_color = _check_unit_interval(base_color, 'base_color', (n, 3))
-    metallic = _check_unit_interval(metallic, 'metallic', (n, ))
-    roughness = _check_unit_interval(roughness, 'roughness', (n, ))
-    K, E = _check_cameras(intrinsics, extrinsics, batched=True)
-    height, width = _check_image_size(height, width)
-    check_envmap(envmap)
-    centres = camera_centers(torch.from_numpy(E)).numpy()
-    pixel_index, attributes = [], []
-    for v in range(K.shape[0]):  # one compiled rasterisation per view
-        face_id, bary, _ = _rasterize_kernel(
-            _to_camera(V, E[v]), F, K[v], np.linalg.inv(K[v]), 1e-6, height,
-            width)
-        covered = np.nonzero(face_id.ravel() >= 0)[0]
-        corners = F[face_id.ravel()[covered]]  # (M, 3)
-        lam = bary.reshape(-1, 3)[covered][..., None]  # (M, 3, 1)
-        pos = (lam * V[corners]).sum(1)
-        nrm = (lam * normal[corners]).sum(1)
-        bc = (lam * base_color.numpy()[corners]).sum(1)
-        mr = np.stack([(lam[..., 0] * metallic.numpy()[corners]).sum(1),
-                       (lam[..., 0] * roughness.numpy()[corners]).sum(1)],
-                      1)
-        view = centres[v] - pos
-        pixel_index.append(v * height * width + covered)
-        attributes.append(np.concatenate([nrm, bc, mr, view], 1))
-    image = np.zeros((K.shape[0] * height * width, 3))
-    if sum(len(p) for p in pixel_index):
-        pixel_index = np.concatenate(pixel_index)
-        a = torch.from_numpy(np.concatenate(attributes))
-        nrm = a[:, :3]
-        nrm = nrm / nrm.norm(dim=1, keepdim=True).clamp_min(1e-300)
-        view = a[:, 8:11]
-        view = view / view.norm(dim=1, keepdim=True)
-        # interpolation can leave tiny excursions outside [0, 1]
-        radiance = render_radiance(
-            nrm, a[:, 3:6].clamp(0, 1), a[:, 6].clamp(0, 1),
-            a[:, 7].clamp(0, 1), view[:, None], envmap,
-            specular_samples=specular_samples, light_samples=light_samples,
-            diffuse_resolution=diffuse_resolution, seed=seed,
-            irradiance_table=True)
-        image[pixel_index] = radiance[:, 0].numpy()
-    return torch.from_numpy(image.reshape(K.shape[0], height, width, 3)
-                            ).float()

@@ -22,7 +22,7 @@ import math
 import torch
 from torch import Tensor
 
-from ._checks import check_tensor
+from ..checks import check_positive_int, check_tensor
 
 
 def num_coefficients(l_max: int) -> int:
@@ -35,13 +35,6 @@ def sh_index(l: int, m: int) -> int:  # noqa: E741
     return l * (l + 1) + m
 
 
-def _check_l_max(l_max) -> int:
-    if not isinstance(l_max, int) or l_max < 0:
-        raise ValueError(f"'l_max' must be a non-negative integer, got "
-                         f"{l_max!r}")
-    return l_max
-
-
 def real_sh(directions: Tensor, l_max: int) -> Tensor:
     r"""The real orthonormal spherical harmonics :math:`Y_{lm}` up to degree
     :obj:`l_max` at unit :obj:`directions` :math:`(\ldots, 3)`, as
@@ -52,7 +45,7 @@ def real_sh(directions: Tensor, l_max: int) -> Tensor:
     \operatorname{Im} (x + i y)^m`), so there is no :math:`\arctan` and no
     singularity at the poles, and gradients flow through the directions.
     Directions are used as given; normalise them first."""
-    l_max = _check_l_max(l_max)
+    l_max = check_positive_int(l_max, 'l_max', minimum=0)
     directions = check_tensor(directions, 'directions')
     if directions.size(-1) != 3:
         raise ValueError(f"'directions' must end in 3 coordinates, got "
@@ -137,7 +130,7 @@ def fit_sh(directions: Tensor, values: Tensor, l_max: int,
         Coefficients :math:`(\ldots, (l^*+1)^2)` or :math:`(\ldots,
         (l^*+1)^2, C)`.
     """
-    l_max = _check_l_max(l_max)
+    l_max = check_positive_int(l_max, 'l_max', minimum=0)
     if not (regularizer >= 0 and math.isfinite(regularizer)):
         raise ValueError(f"'regularizer' must be finite and >= 0, got "
                          f"{regularizer!r}")
@@ -173,7 +166,7 @@ def fit_sh(directions: Tensor, values: Tensor, l_max: int,
 def power_spectrum(coefficients: Tensor, l_max: int) -> Tensor:
     r""":math:`S(l) = \sum_m c_{lm}^2` per degree: :math:`(\ldots,
     (l^*+1)^2)` to :math:`(\ldots, l^* + 1)`; invariant under rotations."""
-    l_max = _check_l_max(l_max)
+    l_max = check_positive_int(l_max, 'l_max', minimum=0)
     if coefficients.size(-1) != num_coefficients(l_max):
         raise ValueError(f"expected {num_coefficients(l_max)} coefficients "
                          f"for l_max={l_max}, got {coefficients.size(-1)}")
@@ -189,7 +182,7 @@ def brdf_filter(l_max: int, alpha: Tensor) -> Tensor:
     roughness :math:`\alpha`, :math:`e^{-(\alpha l)^2}` per coefficient:
     :math:`(\ldots)` to :math:`(\ldots, (l^*+1)^2)` (Ramamoorthi and
     Hanrahan's frequency-space approximation)."""
-    l_max = _check_l_max(l_max)
+    l_max = check_positive_int(l_max, 'l_max', minimum=0)
     alpha = torch.as_tensor(alpha)
     if not alpha.is_floating_point():
         alpha = alpha.double()
@@ -265,3 +258,24 @@ def torrance_sparrow_to_principled(kd: Tensor, r0: Tensor, alpha: Tensor):
     metallic = (1 - s.squeeze(-1)).clamp(0, 1)
     base_color = (total - 0.04 * s).clamp(0, 1)
     return base_color, metallic, alpha.clamp(0, 1).sqrt()
+
+
+def light_directions(num_samples: int, dtype=torch.float64, device=None):
+    """The local sample directions of the incoming light (a Fibonacci
+    sphere), shared by every point."""
+    return fibonacci_sphere(num_samples, dtype=dtype, device=device)
+
+
+def light_fit_matrix(directions, l_max: int, regularizer: float):
+    r"""The regularised, cosine-weighted least-squares operator
+    :math:`(Y^\top W Y + \lambda \operatorname{diag}(e^l))^{-1} Y^\top W`
+    with :math:`W = \max(0, \cos\theta)`, :math:`(K, S)`, the same for
+    every point. Only the upper hemisphere is fitted; the lower one is left
+    to the regulariser, which continues the light smoothly (cutting it to
+    zero at the horizon would ring through every degree instead)."""
+    Y = real_sh(directions, l_max)
+    weights = directions[:, 2].clamp_min(0).unsqueeze(-1)
+    l = torch.arange(l_max + 1, dtype=Y.dtype, device=Y.device)  # noqa: E741
+    l = l.repeat_interleave(2 * l.long() + 1)
+    gram = (Y * weights).t() @ Y + regularizer * torch.diag(l.exp())
+    return torch.linalg.solve(gram, (Y * weights).t())

@@ -7,8 +7,8 @@ import torch
 from numba import njit
 from torch import Tensor
 
-from ._checks import check_points, check_tensor
-from ._fmm import _sift_down, _sift_up
+from ..checks import check_points, check_tensor
+from ..heap import sift_down, sift_up
 
 
 def graph_voronoi(pos: Tensor, edge_index: Tensor, seeds: Tensor,
@@ -87,12 +87,12 @@ def _multi_source_dijkstra(indptr, indices, weights, seeds, n
                            ):  # pragma: no cover (numba)
     dist = np.full(n, np.inf)
     cell = np.full(n, -1, dtype=np.int64)
-    _dijkstra_from(indptr, indices, weights, seeds, dist, cell)
+    dijkstra_from(indptr, indices, weights, seeds, dist, cell)
     return cell, dist
 
 
 @njit(cache=True)
-def _dijkstra_from(indptr, indices, weights, seeds, dist, cell
+def dijkstra_from(indptr, indices, weights, seeds, dist, cell
                    ):  # pragma: no cover (numba)
     """Multi-source Dijkstra that updates ``dist`` and ``cell`` in place.
     Only the seeds enter the queue, so finite starting distances elsewhere
@@ -171,12 +171,12 @@ def _heap_dijkstra_from(indptr, indices, weights, seeds, dist, cell
             heap_d[size], heap_v[size] = 0.0, v
             size += 1
     for k in range(size // 2 - 1, -1, -1):
-        _sift_down(heap_d, heap_v, k, size)
+        sift_down(heap_d, heap_v, k, size)
     while size > 0:
         d, u = heap_d[0], heap_v[0]
         size -= 1
         heap_d[0], heap_v[0] = heap_d[size], heap_v[size]
-        _sift_down(heap_d, heap_v, 0, size)
+        sift_down(heap_d, heap_v, 0, size)
         if d > dist[u]:
             continue
         for e in range(indptr[u], indptr[u + 1]):
@@ -186,5 +186,5 @@ def _heap_dijkstra_from(indptr, indices, weights, seeds, dist, cell
                 dist[v] = nd
                 cell[v] = cell[u]
                 heap_d[size], heap_v[size] = nd, v
-                _sift_up(heap_d, heap_v, size)
+                sift_up(heap_d, heap_v, size)
                 size += 1

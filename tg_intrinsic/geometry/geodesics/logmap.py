@@ -31,14 +31,15 @@ import torch
 from numba import get_num_threads, njit, prange
 from torch import Tensor
 
-from . import _vector_heat
-from ._checks import (check_edge_index, check_faces, check_nondegenerate,
+from . import vector_heat as _vector_heat
+from ..checks import (check_edge_index, check_faces, check_nondegenerate,
                       check_points, check_positive_float, check_positive_int,
                       check_tensor, check_vectors, same_device)
-from ._fmm import march_from, march_many, surface_index
-from .frames import check_frames, tangent_frames
-from .mesh import edge_face_counts, face_areas, lumped_mass, vertex_normals
-from .neighbors import knn, radius
+from .fast_marching import march_from, march_many, surface_index
+from ..checks import check_frames
+from ..pointcloud.frames import tangent_frames
+from ..mesh import edge_face_counts, face_areas, lumped_mass, vertex_normals
+from ..pointcloud.neighbors import knn, radius
 
 __all__ = ['geodesic_neighbourhoods', 'log_map', 'vertex_area_weights',
            'estimate_disc_edges', 'check_disc_memory', 'hsn_bytes_per_edge',
@@ -705,7 +706,7 @@ def log_map(pos: Tensor, edge_index: Tensor, frame: Optional[Tensor] = None,
     vector transport of the Vector Heat Method (Sharp, Soliman and Crane,
     2019), the quantities the original HSN code gets from geometry-central
     with one global solve each per vertex. On meshes they are computed by
-    our own solver (:mod:`tg_intrinsic.geometry._affine_heat`): on the
+    our own solver (:mod:`tg_intrinsic.geometry.geodesics.affine_heat`): on the
     intrinsic Delaunay triangulation (as potpourri3d does by default; the
     obtuse triangles of real meshes otherwise make heat flows change sign
     and directions flip), with the affine heat system split into its

@@ -29,7 +29,7 @@ from numba import njit, prange
 from scipy.spatial import cKDTree
 from torch import Tensor
 
-from ._checks import (batch_sizes, check_batch, check_points,
+from ..checks import (batch_sizes, check_batch, check_points,
                       check_positive_float, check_positive_int, same_device)
 
 __all__ = ['knn', 'radius', 'fps']

@@ -1,7 +1,7 @@
 r"""Equirectangular environment maps: directions, solid angles and lookup.
 
 Convention (world :math:`z` is up, as the polar angle of
-:mod:`tg_intrinsic.geometry.sh`): an environment map is an array
+:mod:`tg_intrinsic.geometry.appearance.sh`): an environment map is an array
 :math:`(H, W, 3)` of linear radiance. Pixel ``(row, col)`` covers polar
 angles :math:`\theta \in [\pi\,\mathrm{row}/H, \pi(\mathrm{row}+1)/H]`
 (row 0 looks up, at :math:`+z`) and azimuths :math:`\phi \in [2\pi\,
@@ -17,7 +17,7 @@ import math
 import torch
 from torch import Tensor
 
-from ._checks import check_tensor
+from ..checks import check_positive_int, check_tensor
 
 
 def check_envmap(envmap, name: str = 'envmap') -> Tensor:
@@ -133,7 +133,7 @@ def _row_harmonics(height: int, l_max: int, dtype, device):
     :math:`Y_{lm}(\theta, \phi) = \Lambda_{l|m|}(\theta)\,T_m(\phi)` with
     :math:`T_m = \cos(m\phi)` for :math:`m \ge 0` and :math:`\sin(|m|\phi)`
     otherwise. Returns :math:`\Lambda` at the row centres :math:`(H, K)`
-    (coefficient order of :func:`~tg_intrinsic.geometry.sh.real_sh`) and,
+    (coefficient order of :func:`~tg_intrinsic.geometry.appearance.sh.real_sh`) and,
     per coefficient, the column :math:`m + l^*` of :func:`_azimuth_table`."""
     from .sh import num_coefficients, real_sh
     theta = (torch.arange(height, dtype=dtype, device=device) + 0.5) \
@@ -187,11 +187,11 @@ def envmap_to_sh(envmap: Tensor, l_max: int) -> Tensor:
 
     Returns:
         Coefficients :math:`((l^*+1)^2, 3)` in the order of
-        :func:`~tg_intrinsic.geometry.sh.real_sh`, dtype and device of the
+        :func:`~tg_intrinsic.geometry.appearance.sh.real_sh`, dtype and device of the
         map.
     """
-    from .sh import _check_l_max
-    return _to_sh(_check_map(envmap, signed=True), _check_l_max(l_max))
+    return _to_sh(_check_map(envmap, signed=True),
+                  check_positive_int(l_max, 'l_max', minimum=0))
 
 
 def _fejer_weights(height: int, dtype, device) -> Tensor:
@@ -253,7 +253,6 @@ def sh_to_envmap(coefficients: Tensor, height: int, width: int) -> Tensor:
         :math:`(H, W, C)` (or :math:`(H, W)`), dtype and device of the
         coefficients.
     """
-    from ._checks import check_positive_int
     coefficients = check_tensor(coefficients, 'coefficients')
     height = check_positive_int(height, 'height')
     width = check_positive_int(width, 'width')
@@ -309,7 +308,6 @@ def downsample_envmap(envmap: Tensor, factor: int) -> Tensor:
     Returns:
         :math:`(H / f, W / f, 3)`.
     """
-    from ._checks import check_positive_int
     envmap = check_envmap(envmap)
     factor = check_positive_int(factor, 'factor')
     height, width, channels = envmap.shape
@@ -348,7 +346,7 @@ def filter_envmap(envmap: Tensor, alpha: float,
                   out_height: int = None) -> Tensor:
     r"""Band-limits an environment map with the spherical Gaussian whose
     harmonic attenuation is the lobe filter of
-    :func:`~tg_intrinsic.geometry.sh.brdf_filter`,
+    :func:`~tg_intrinsic.geometry.appearance.sh.brdf_filter`,
 
     .. math::
         c'_{lm} = e^{-(\alpha l)^2}\, c_{lm}, \qquad l \le L =
@@ -380,7 +378,7 @@ def filter_envmap(envmap: Tensor, alpha: float,
     Returns:
         :math:`(H', 2H', 3)`, dtype and device of the map.
     """
-    from ._checks import check_positive_float, check_positive_int
+    from ..checks import check_positive_float, check_positive_int
     from .sh import brdf_filter
     envmap = check_envmap(envmap)
     alpha = check_positive_float(alpha, 'alpha')
@@ -444,7 +442,7 @@ def irradiance(envmap: Tensor, normals: Tensor,
     Returns:
         :math:`(N, 3)`, in the promoted dtype of the map and the normals.
     """
-    from ._checks import check_points, check_positive_int, same_device
+    from ..checks import check_points, check_positive_int, same_device
     envmap = check_envmap(envmap)
     normals = check_points(normals, 'normals')
     same_device(normals, 'normals', envmap, 'envmap')
@@ -529,7 +527,7 @@ def sun_sky_envmap(height: int = 256, width: int = 512,
     Returns:
         :math:`(H, W, 3)` radiance.
     """
-    from ._checks import check_positive_float, check_positive_int
+    from ..checks import check_positive_float, check_positive_int
     height = check_positive_int(height, 'height', 2)
     width = check_positive_int(width, 'width', 2)
     radius = check_positive_float(sun_angular_radius, 'sun_angular_radius',

@@ -50,7 +50,7 @@ def lobe_filter(l_max: int, alpha: Tensor, prefilter_alpha: float = 0.0
     band-limited by a filter of width :math:`\alpha'`,
     :math:`e^{-(\alpha^2 - \alpha'^2) l^2}`: :math:`(\ldots)` to
     :math:`(\ldots, (l^*+1)^2)`. With :math:`\alpha'=0` it is
-    :func:`~tg_intrinsic.geometry.sh.brdf_filter`."""
+    :func:`~tg_intrinsic.geometry.appearance.sh.brdf_filter`."""
     l = degrees(l_max, alpha.dtype, alpha.device)  # noqa: E741
     return torch.exp(-(alpha.unsqueeze(-1) ** 2 - prefilter_alpha ** 2) * l * l)
 

@@ -1,5 +1,5 @@
 r"""Vector calculus on point clouds from per-edge gradient and divergence
-weights (see :mod:`tg_intrinsic.geometry.mls`).
+weights (see :mod:`tg_intrinsic.geometry.pointcloud.mls`).
 
 Scalar fields are ``[N, C]``; tangent vector fields are ``[N, C, 2]``, the
 coordinates of every vector in its point's own frame :math:`(e_u, e_v)`.
@@ -28,6 +28,8 @@ import numpy as np
 import torch
 from numba import njit, prange
 from torch import Tensor
+
+from ..sparse import SparseMM
 
 # CSR matrix products are stable for what is used here (mm with a dense
 # matrix, and its backward); the generic "beta" notice is noise for users.
@@ -127,19 +129,6 @@ def hodge_laplacian(v: Tensor, edge_index: Tensor, grad_weight: Tensor,
     return -(gd - jgdj)
 
 
-class _SparseMM(torch.autograd.Function):
-    """``A @ x`` whose backward uses a precomputed ``A^T`` (torch's own
-    backward transposes and re-sorts the sparse matrix on every call)."""
-    @staticmethod
-    def forward(ctx, matrix: Tensor, transposed: Tensor, x: Tensor):
-        ctx.transposed = transposed
-        return torch.sparse.mm(matrix, x)
-
-    @staticmethod
-    def backward(ctx, grad_out: Tensor):
-        return None, None, torch.sparse.mm(ctx.transposed, grad_out)
-
-
 class SurfaceOperators:
     r"""Gradient and divergence of a (batched) point cloud as sparse CSR
     matrices, built once and shared by every layer of a network.
@@ -187,13 +176,13 @@ class SurfaceOperators:
 
     def grad(self, x: Tensor) -> Tensor:
         """:math:`G x`: ``[N, C]`` -> ``[N, C, 2]``."""
-        out = _SparseMM.apply(self.G, self.G_t, x)  # [2N, C]
+        out = SparseMM.apply(self.G, self.G_t, x)  # [2N, C]
         return interleaved(out.view(2, self.num_nodes, -1))
 
     def div(self, v: Tensor) -> Tensor:
         """:math:`D v`: ``[N, C, 2]`` -> ``[N, C]``."""
         flat = planar(v).reshape(2 * self.num_nodes, -1)
-        return _SparseMM.apply(self.D, self.D_t, flat)
+        return SparseMM.apply(self.D, self.D_t, flat)
 
     def curl(self, v: Tensor) -> Tensor:
         """:math:`-D J v`: ``[N, C, 2]`` -> ``[N, C]``."""
@@ -263,7 +252,7 @@ class SurfaceOperators:
                                              (self.num_nodes, self.num_nodes),
                                              check_invariants=False)
             self.A_t = self.A.t().to_sparse_csr()
-        return _SparseMM.apply(self.A.to(x.dtype), self.A_t.to(x.dtype), x)
+        return SparseMM.apply(self.A.to(x.dtype), self.A_t.to(x.dtype), x)
 
     def edge_max(self, values: Tensor) -> Tensor:
         r"""Per centre, the maximum of per-edge values given in the order of

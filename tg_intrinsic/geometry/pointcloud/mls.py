@@ -24,7 +24,7 @@ import torch
 from numba import njit, prange
 from torch import Tensor
 
-from ._checks import (check_batch, check_edge_index, check_points,
+from ..checks import (check_batch, check_edge_index, check_points,
                       check_positive_float, check_tensor, same_device)
 
 #: Monomials of the quadratic fit: 1, u, v, u^2, sqrt(2) uv, v^2. The factor
@@ -195,7 +195,8 @@ def build_mls_operators(pos: Tensor, k: int = 20,
         :math:`(2, N k)`, :math:`(N, 3, 3)`, :math:`(N k, 2)`,
         :math:`(N k, 2)`.
     """
-    from .frames import check_frames, estimate_normals, tangent_frames
+    from ..checks import check_frames
+    from .frames import estimate_normals, tangent_frames
     from .neighbors import knn
 
     pos = check_points(pos)

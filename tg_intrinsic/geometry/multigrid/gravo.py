@@ -9,8 +9,8 @@ from typing import List, NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from ._checks import check_choice
-from .voronoi import _dijkstra_from
+from ..checks import check_choice
+from .voronoi import dijkstra_from
 
 WEIGHTINGS = ('barycentric', 'inverse_distance', 'uniform')
 VORONOI = ('exact', 'sweep')
@@ -395,7 +395,7 @@ def _coarsen(pos, indptr, indices, ratio, shift, weighting, voronoi):
     if voronoi == 'exact':
         dist[:] = np.inf
         cluster[:] = -1
-    _dijkstra_from(indptr, indices, length, sample, dist, cluster)
+    dijkstra_from(indptr, indices, length, sample, dist, cluster)
     m = sample.size
     c_ptr, c_nbr = _csr(np.stack(_coarse_edges(indptr, indices, cluster)),
                         m)

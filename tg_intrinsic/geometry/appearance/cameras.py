@@ -14,43 +14,10 @@ from typing import Tuple
 import torch
 from torch import Tensor
 
-from ._checks import check_points, check_positive_int, check_tensor
+from ..checks import check_image_size, check_points
 
-
-def check_cameras(intrinsics, extrinsics, like: Tensor) -> int:
-    """Checks camera arrays and returns the number of views."""
-    intrinsics = check_tensor(intrinsics, 'intrinsics')
-    extrinsics = check_tensor(extrinsics, 'extrinsics')
-    if intrinsics.dim() != 3 or tuple(intrinsics.shape[1:]) != (3, 3):
-        raise ValueError(f"'intrinsics' must have shape [V, 3, 3] (one pinhole "
-                         f"matrix K per view), got {list(intrinsics.shape)}")
-    if extrinsics.dim() != 3 or tuple(extrinsics.shape[1:]) != (3, 4):
-        raise ValueError(f"'extrinsics' must have shape [V, 3, 4] (world-to-"
-                         f"camera [R | t] per view), got "
-                         f"{list(extrinsics.shape)}")
-    if intrinsics.size(0) != extrinsics.size(0):
-        raise ValueError(f"'intrinsics' has {intrinsics.size(0)} views but "
-                         f"'extrinsics' has {extrinsics.size(0)}")
-    for name, value in (('intrinsics', intrinsics),
-                        ('extrinsics', extrinsics)):
-        if not value.is_floating_point() or not bool(
-                torch.isfinite(value).all()):
-            raise ValueError(f"'{name}' must be finite floating-point "
-                             f"matrices")
-        if value.device != like.device:
-            raise ValueError(f"'{name}' is on {value.device} but the points "
-                             f"are on {like.device}; move both to one device")
-    focal = intrinsics[:, [0, 1], [0, 1]]
-    if bool((focal <= 0).any()):
-        raise ValueError("'intrinsics' must have positive focal lengths "
-                         "K[0, 0] and K[1, 1]")
-    rotation = extrinsics[:, :, :3].double()
-    eye = torch.eye(3, dtype=torch.float64, device=like.device)
-    if not bool(torch.allclose(rotation @ rotation.transpose(1, 2),
-                               eye.expand_as(rotation), atol=1e-4)):
-        raise ValueError("'extrinsics' must hold rotations in [:, :, :3] "
-                         "(orthonormal R of x_cam = R x + t)")
-    return intrinsics.size(0)
+__all__ = ['camera_centers', 'project', 'splat_depth', 'sample_images',
+           'look_at_cameras']
 
 
 def camera_centers(extrinsics: Tensor) -> Tensor:
@@ -126,15 +93,6 @@ def sample_images(images: Tensor, uv: Tensor):
         nan |= bad.any(-1)
         value = value + torch.where(bad, torch.zeros_like(t), t) * w
     return value, nan
-
-
-def check_image_size(image_size, name: str = 'image_size'):
-    """``(height, width)``, two positive integers."""
-    if not (isinstance(image_size, (tuple, list)) and len(image_size) == 2):
-        raise ValueError(f"'{name}' must be (height, width), got "
-                         f"{image_size!r}")
-    return (check_positive_int(image_size[0], f'{name}[0]'),
-            check_positive_int(image_size[1], f'{name}[1]'))
 
 
 def look_at_cameras(positions: Tensor, target=(0.0, 0.0, 0.0),

@@ -26,6 +26,8 @@ distances by up to 15 % even on regular meshes.
 import numpy as np
 from numba import get_num_threads, njit, prange
 
+from ..heap import sift_down, sift_up
+
 # At most this many relaxation sweeps after marching (see :func:`march`):
 # on a jittered flat grid 3 leave 2 % worst-case error (16 leave none) and
 # cost about as much as the marching itself.
@@ -70,35 +72,6 @@ def _unfold(ab, ac, bc, da, db):  # pragma: no cover (numba)
 
 
 @njit(cache=True)
-def _sift_up(hd, hv, k):  # pragma: no cover (numba)
-    while k > 0:
-        parent = (k - 1) >> 1
-        if hd[parent] <= hd[k]:
-            break
-        hd[parent], hd[k] = hd[k], hd[parent]
-        hv[parent], hv[k] = hv[k], hv[parent]
-        k = parent
-
-
-@njit(cache=True)
-def _sift_down(hd, hv, k, size):  # pragma: no cover (numba)
-    """Moves entry ``k`` of a binary min-heap of ``size`` entries (keys
-    ``hd``, values ``hv``) down to its place; shared with voronoi.py."""
-    while True:
-        left = 2 * k + 1
-        if left >= size:
-            break
-        small = left
-        if left + 1 < size and hd[left + 1] < hd[left]:
-            small = left + 1
-        if hd[k] <= hd[small]:
-            break
-        hd[small], hd[k] = hd[k], hd[small]
-        hv[small], hv[k] = hv[k], hv[small]
-        k = small
-
-
-@njit(cache=True)
 def march(face, length, vf_ptr, vf_face, vf_corner, sources, limit, cap,
           tol, dist, final, touched, where, out_v,
           out_d):  # pragma: no cover (numba)
@@ -137,7 +110,7 @@ def march(face, length, vf_ptr, vf_face, vf_corner, sources, limit, cap,
         heap -= 1
         hd[0] = hd[heap]
         hv[0] = hv[heap]
-        _sift_down(hd, hv, 0, heap)
+        sift_down(hd, hv, 0, heap)
         if final[v] or d > dist[v]:
             continue  # a stale heap entry (lazy deletion)
         if d >= limit:
@@ -191,7 +164,7 @@ def march(face, length, vf_ptr, vf_face, vf_corner, sources, limit, cap,
                         hv = hv2
                     hd[heap] = cand
                     hv[heap] = w
-                    _sift_up(hd, hv, heap)
+                    sift_up(hd, hv, heap)
                     heap += 1
     # Relaxation sweeps (Gauss-Seidel in marching order) for what the
     # updates above did not reach: redo every triangle update with final

@@ -4,8 +4,8 @@ from typing import Optional, Tuple
 import torch
 from torch import Tensor
 
-from ._checks import check_faces, check_points, check_positive_int
-from .mesh import face_areas
+from ..checks import check_faces, check_points, check_positive_int
+from ..mesh import face_areas
 from .neighbors import fps
 
 

@@ -11,7 +11,7 @@ Here the centres are grouped around seeds, every group is solved on the
 patch within a band of ``margin * h`` around its discs (one factorisation
 per patch, the diffusion time of the whole surface), or on the whole
 component where a cost model says so, and only the entries of the requested
-edges are kept. Meshes use our own solver (:mod:`._affine_heat`, blocks of
+edges are kept. Meshes use our own solver (:mod:`.affine_heat`, blocks of
 centres in threads); point clouds use potpourri3d's point-cloud solver, with
 large jobs in worker processes. :func:`_mesh_conversion` and
 :func:`_solve_centres` also turn potpourri3d's mesh solver into the
@@ -31,8 +31,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
-from ._affine_heat import AffineHeatPatch, MeshTangentData
-from ._fmm import march_one, surface_index
+from .affine_heat import AffineHeatPatch, MeshTangentData
+from .fast_marching import march_one, surface_index
 
 # Group spacing as a fraction of the typical disc-plus-band radius: larger
 # groups share one factorisation among more centres but solve on bigger

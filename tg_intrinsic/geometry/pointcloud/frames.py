@@ -7,8 +7,7 @@ import torch
 from numba import njit, prange
 from torch import Tensor
 
-from ._checks import (check_batch, check_points, check_positive_int,
-                      check_vectors)
+from ..checks import check_batch, check_points, check_positive_int
 from .neighbors import knn
 
 
@@ -573,21 +572,3 @@ def tangent_frames(normal: Tensor) -> Tensor:
     e_u = e_u / e_u.norm(dim=-1, keepdim=True)
     e_v = torch.linalg.cross(n, e_u)
     return torch.stack([e_u, e_v, n], dim=1)
-
-
-def check_frames(frame, num: int, like: Tensor) -> Tensor:
-    """Validates user-supplied frames ``[N, 3, 3]`` (rows e_u, e_v, n)."""
-    if not isinstance(frame, Tensor) or frame.dim() != 3 \
-            or tuple(frame.shape[1:]) != (3, 3):
-        raise ValueError("'frame' must be a tensor of shape [N, 3, 3] with "
-                         "rows (e_u, e_v, normal)")
-    check_vectors(frame.reshape(-1, 3), 'frame', 3 * num, like)
-    eye = torch.eye(3, dtype=frame.dtype, device=frame.device)
-    gram = frame @ frame.transpose(1, 2)
-    tol = 1e-4 if frame.dtype == torch.float32 else 1e-8
-    if not bool(((gram - eye).abs() <= tol).all()):
-        raise ValueError("'frame' rows must be orthonormal; build frames "
-                         "with tangent_frames(normal)")
-    if not bool((torch.linalg.det(frame) > 0).all()):
-        raise ValueError("'frame' must be right-handed (e_u x e_v = normal)")
-    return frame

@@ -1,11 +1,13 @@
-"""Input validation shared by the geometry functions.
+"""Input validation shared by the whole library.
 
-Every public geometry function calls these before doing any maths, so that
-malformed input fails with a :class:`ValueError` that names the argument, says
-what is wrong and what to do, instead of producing NaNs further down.
+Every public function, transform, layer and solver calls these before doing
+any maths, so that malformed input fails with a :class:`ValueError` that
+names the argument, says what is wrong and what to do, instead of producing
+NaNs further down. One check per kind of value, decided here only.
 """
-from typing import Optional
+from typing import Optional, Sequence, Tuple
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -179,3 +181,140 @@ def check_edge_index(edge_index, num: int, ref: Tensor) -> Tensor:
                              f"outside [0, {num}): there are only {num} "
                              f"points")
     return edge_index
+
+
+def check_float_tensor(value, name: str, shape: Sequence[int]) -> Tensor:
+    """A finite floating-point tensor of exactly ``shape``."""
+    value = check_tensor(value, name)
+    if tuple(value.shape) != tuple(shape):
+        raise ValueError(f"'{name}' must have shape {list(shape)}, got "
+                         f"{list(value.shape)}")
+    if not value.is_floating_point():
+        raise ValueError(f"'{name}' must be a float tensor, got "
+                         f"{value.dtype}")
+    if value.numel() and not bool(torch.isfinite(value).all()):
+        raise ValueError(f"'{name}' contains NaN or infinite values; "
+                         f"repair those rows first")
+    return value
+
+
+def check_unit_rows(value, name: str, shape: Sequence[int]) -> np.ndarray:
+    """Directions of ``shape`` (no zero rows), normalised, float64 numpy."""
+    value = check_float_tensor(value, name, shape)
+    norm = value.double().norm(dim=-1, keepdim=True)
+    if value.numel() and bool((norm <= 1e-12).any()):
+        raise ValueError(f"'{name}' has zero-length direction(s); every "
+                         f"row must be a (unit) direction")
+    return (value.double() / norm).cpu().numpy()
+
+
+def check_unit_interval(value, name: str, shape: Sequence[int]) -> Tensor:
+    """Values of ``shape`` in [0, 1], as a float64 CPU tensor."""
+    value = check_float_tensor(value, name, shape)
+    if value.numel() and bool(((value < 0) | (value > 1)).any()):
+        raise ValueError(f"'{name}' must lie in [0, 1], got values in "
+                         f"[{float(value.min()):g}, {float(value.max()):g}]"
+                         f"; clamp it first")
+    return value.double().cpu()
+
+
+def check_seed(seed) -> int:
+    """A non-negative integer seed."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) \
+            or seed < 0:
+        raise ValueError(f"'seed' must be a non-negative integer, got "
+                         f"{seed!r}")
+    return int(seed)
+
+
+def check_image_size(image_size, name: str = 'image_size') -> Tuple[int, int]:
+    """``(height, width)``, two positive integers."""
+    if not (isinstance(image_size, (tuple, list)) and len(image_size) == 2):
+        raise ValueError(f"'{name}' must be (height, width), got "
+                         f"{image_size!r}")
+    return (check_positive_int(image_size[0], f'{name}[0]'),
+            check_positive_int(image_size[1], f'{name}[1]'))
+
+
+def check_cameras(intrinsics, extrinsics, like: Optional[Tensor] = None,
+                  batched: bool = True) -> Tuple[Tensor, Tensor]:
+    """Pinhole cameras, OpenCV style: ``intrinsics`` ``[V, 3, 3]`` matrices
+    ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` with ``fx, fy > 0`` and
+    ``extrinsics`` ``[V, 3, 4]`` world-to-camera ``[R | t]`` with ``R`` a
+    rotation (``[3, 3]`` and ``[3, 4]`` with :obj:`batched=False`), finite,
+    on the device of ``like`` if given. Returns both as ``[V, 3, 3]`` and
+    ``[V, 3, 4]``."""
+    intrinsics = check_tensor(intrinsics, 'intrinsics')
+    extrinsics = check_tensor(extrinsics, 'extrinsics')
+    dims = 3 if batched else 2
+    if intrinsics.dim() != dims or tuple(intrinsics.shape[-2:]) != (3, 3) \
+            or extrinsics.dim() != dims \
+            or tuple(extrinsics.shape[-2:]) != (3, 4):
+        names = ('[V, 3, 3] (one pinhole matrix K per view) and [V, 3, 4] '
+                 '(world-to-camera [R | t] per view)' if batched
+                 else '[3, 3] and [3, 4]')
+        raise ValueError(f"'intrinsics' and 'extrinsics' must have shapes "
+                         f"{names}, got {list(intrinsics.shape)} and "
+                         f"{list(extrinsics.shape)}")
+    intrinsics = intrinsics.reshape(-1, 3, 3)
+    extrinsics = extrinsics.reshape(-1, 3, 4)
+    if intrinsics.size(0) != extrinsics.size(0):
+        raise ValueError(f"'intrinsics' has {intrinsics.size(0)} views but "
+                         f"'extrinsics' has {extrinsics.size(0)}")
+    for name, value in (('intrinsics', intrinsics),
+                        ('extrinsics', extrinsics)):
+        if not value.is_floating_point() or not bool(
+                torch.isfinite(value).all()):
+            raise ValueError(f"'{name}' must be finite floating-point "
+                             f"matrices")
+        if like is not None:
+            same_device(value, name, like, 'points')
+    K = intrinsics.detach().double()
+    if bool((K[:, 1, 0] != 0).any() or (K[:, 2, :2] != 0).any()
+            or (K[:, 2, 2] != 1).any() or (K[:, 0, 0] <= 0).any()
+            or (K[:, 1, 1] <= 0).any()):
+        raise ValueError("'intrinsics' must be pinhole matrices [[fx, s, "
+                         "cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+    R = extrinsics.detach().double()[:, :, :3]
+    eye = torch.eye(3, dtype=torch.float64, device=R.device)
+    error = (R @ R.transpose(1, 2) - eye).abs().amax((1, 2))
+    bad = ((error > 1e-4) | (torch.linalg.det(R) < 0)).nonzero().flatten()
+    if bad.numel():
+        raise ValueError(f"'extrinsics' must be world-to-camera [R | t] "
+                         f"with R a rotation; camera(s) {bad[:5].tolist()} "
+                         f"are not (re-orthonormalise R)")
+    return intrinsics, extrinsics
+
+
+def check_frames(frame, num: int, like: Tensor) -> Tensor:
+    """Validates user-supplied frames ``[N, 3, 3]`` (rows e_u, e_v, n)."""
+    if not isinstance(frame, Tensor) or frame.dim() != 3 \
+            or tuple(frame.shape[1:]) != (3, 3):
+        raise ValueError("'frame' must be a tensor of shape [N, 3, 3] with "
+                         "rows (e_u, e_v, normal)")
+    check_vectors(frame.reshape(-1, 3), 'frame', 3 * num, like)
+    eye = torch.eye(3, dtype=frame.dtype, device=frame.device)
+    gram = frame @ frame.transpose(1, 2)
+    tol = 1e-4 if frame.dtype == torch.float32 else 1e-8
+    if not bool(((gram - eye).abs() <= tol).all()):
+        raise ValueError("'frame' rows must be orthonormal; build frames "
+                         "with tangent_frames(normal)")
+    if not bool((torch.linalg.det(frame) > 0).all()):
+        raise ValueError("'frame' must be right-handed (e_u x e_v = normal)")
+    return frame
+
+
+def check_prolongation(x: Tensor, prolong_index: Tensor,
+                       prolong_weight: Tensor, rows: int, side: str):
+    """A prolongation ``[2, nnz]`` (fine, coarse) with one weight per
+    entry, whose ``side`` ('fine' or 'coarse') indexes the rows of x."""
+    if prolong_index.dim() != 2 or prolong_index.size(0) != 2:
+        raise ValueError(f"'prolong_index' must be [2, nnz], got "
+                         f"{list(prolong_index.shape)}")
+    if prolong_weight.shape != prolong_index.shape[1:]:
+        raise ValueError("'prolong_weight' must hold one weight per column "
+                         "of 'prolong_index'")
+    index = prolong_index[0 if side == 'fine' else 1]
+    if index.numel() and int(index.max()) >= rows:
+        raise ValueError(f"'prolong_index' refers to {side} point "
+                         f"{int(index.max())} but x has {rows} rows")

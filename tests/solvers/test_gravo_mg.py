@@ -205,6 +205,16 @@ def test_bad_input():
             solver.solve(A, b, **options)
 
 
+def test_prolongations_are_checked():
+    _, _, solver = case('closed')
+    broken = [P.copy() for P in solver.prolongations]
+    broken[1].data[0] = np.nan
+    with pytest.raises(ValueError, match='prolongation 1 holds NaN'):
+        GravoMG(broken)
+    with pytest.raises(ValueError, match='do not chain'):
+        GravoMG(solver.prolongations[::-1])
+
+
 def test_not_converging_warns_or_raises():
     A, m, solver = case('closed')
     with pytest.warns(ConvergenceWarning, match='max_iter=1 cycles'):

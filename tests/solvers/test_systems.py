@@ -1,5 +1,7 @@
 """smooth / poisson against scipy's direct solves, on a mesh (cotan), a
 non-manifold mesh and a point cloud (robust Laplacian); bad input."""
+import re
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -156,3 +158,29 @@ def test_bad_weights():
     bad[3, 0] = float('nan')
     with pytest.raises(ValueError, match='NaN'):
         smooth(data, 1e-2, y=bad)
+
+
+@pytest.mark.parametrize('scale', [1e-8, 1e8])
+def test_extreme_scales_with_scaled_weights(scale):
+    # alpha (area) and eta (1 / area) scale with the surface: then the
+    # smoothed signal is the same at every scale, and the Poisson solution
+    # (S x = M y: x scales like the area) is the same up to the area
+    data = small_data(channels=1)
+    area = float(stiffness_and_mass(data)[1].sum())
+    scaled = data.clone()
+    scaled.pos = data.pos * scale
+    for solve, weight, power, out_power in ((smooth, 1e-2, 2, 0),
+                                            (poisson, 1.0, -2, 2)):
+        reference = solve(data, weight)
+        out = solve(scaled, weight * scale ** power) / scale ** out_power
+        assert torch.allclose(out, reference, rtol=1e-6, atol=1e-9)
+    # unscaled weights at 1e-8 make the mass term vanish under rounding:
+    # a clear error that names the scale and the remedy
+    if scale < 1:
+        with pytest.raises(ValueError, match=r"total area .*'eta' depends "
+                                              r"on the scale"):
+            poisson(scaled, 1.0)
+        suggestion = f'{1.0 / (area * scale ** 2):.3g}'
+        with pytest.raises(ValueError,
+                           match=re.escape(f'use about {suggestion} ')):
+            poisson(scaled, 1.0)

@@ -79,3 +79,16 @@ def test_bad_input():
     # Too small for one level: no level keys, the input comes back whole.
     small = GravoHierarchy(lower_bound=1000)(Data(pos=pos, face=face))
     assert 'pos_1' not in small and torch.equal(small.pos, pos)
+
+
+def test_points_that_cannot_coarsen_end_the_hierarchy():
+    # 50 identical points: no sample covers another, so a level would keep
+    # all of them; it used to repeat that level max_levels times.
+    data = GravoHierarchy(lower_bound=2)(
+        Data(pos=torch.zeros(50, 3, dtype=torch.float64)))
+    assert 'pos_1' not in data
+    spread = GravoHierarchy(lower_bound=2)(
+        Data(pos=torch.rand(50, 3, dtype=torch.float64)))
+    sizes = [spread[f'pos_{level}'].size(0) for level in range(1, 11)
+             if f'pos_{level}' in spread]
+    assert sizes and all(a > b for a, b in zip([50] + sizes, sizes))

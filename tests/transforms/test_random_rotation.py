@@ -55,8 +55,25 @@ def test_points_normals_frames_and_operators_turn_together():
 def test_bad_input():
     with pytest.raises(ValueError, match="axis must be"):
         RandomRotation(axis='w')
-    with pytest.raises(ValueError, match=r"data.pos' of shape \[N, 3\]"):
+    with pytest.raises(ValueError, match=r"data.pos' must have shape "
+                                          r"\[N, 3\]"):
         RandomRotation()(Data(pos=torch.zeros(4, 2)))
+    # integer positions used to rotate to zeros, float16 passed silently
+    with pytest.raises(ValueError, match='float32 or float64'):
+        RandomRotation()(Data(pos=torch.ones(4, 3, dtype=torch.long)))
+    with pytest.raises(ValueError, match='float32 or float64'):
+        RandomRotation()(Data(pos=torch.ones(4, 3, dtype=torch.float16)))
+    with pytest.raises(ValueError, match='NaN'):
+        RandomRotation()(Data(pos=torch.full((4, 3), float('nan'))))
+    pos = torch.randn(6, 3)
+    with pytest.raises(ValueError, match="'data.normal' has 5 rows"):
+        RandomRotation()(Data(pos=pos, normal=torch.randn(5, 3)))
+    with pytest.raises(ValueError, match='frame'):
+        RandomRotation()(Data(pos=pos, frame=torch.eye(3).repeat(5, 1, 1)))
+    with pytest.raises(ValueError, match=r"'data.normal_1' must have shape "
+                                          r"\[2, 3\]"):
+        RandomRotation()(Data(pos=pos, pos_1=pos[:2],
+                              normal_1=torch.randn(3, 3)))
     with pytest.raises(ValueError, match="max_angle must be in"):
         RandomRotation('x', max_angle=0)
     assert repr(RandomRotation('z')) == \

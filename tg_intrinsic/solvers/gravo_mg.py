@@ -116,6 +116,10 @@ class GravoMG:
                  cache_size: int = 4):
         self.prolongations = [sp.csr_matrix(P, dtype=np.float64)
                               for P in prolongations]
+        for level, P in enumerate(self.prolongations):
+            if not np.isfinite(P.data).all():
+                raise ValueError(f"prolongation {level} holds NaN or "
+                                 f"infinite weights; rebuild the hierarchy")
         self.restrictions = [P.T.tocsr() for P in self.prolongations]
         for fine, coarse in zip(self.prolongations, self.prolongations[1:]):
             if fine.shape[1] != coarse.shape[0]:

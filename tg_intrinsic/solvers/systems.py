@@ -84,6 +84,27 @@ def _solve(data, matrix, mass, y, solver, tol, ratio, lower_bound, cycle,
         y.device)
 
 
+# Rounding leaves S's row sums at ~1e-16 of its entries: a mass term below
+# this share of the stiffness cannot be told from a singular matrix.
+RESOLVABLE_MASS = 1e-12
+
+
+def _check_scale(S: sp.csr_matrix, m: np.ndarray, mass_weight: float,
+                 stiffness_weight: float, parameter: str, suggestion: float):
+    """The mass term must stand out of the stiffness term's rounding. Both
+    weights are in absolute units, so at an extreme scale a weight meant
+    for a unit-area surface makes the system singular in float64."""
+    share = mass_weight * m.max() / (stiffness_weight * abs(S).max())
+    if share < RESOLVABLE_MASS:
+        raise ValueError(
+            f"at this scale (total area {m.sum():.3g}) the mass term is "
+            f"{share:.1e} of the stiffness term, below float64 rounding, so "
+            f"the system is singular in practice; '{parameter}' depends on "
+            f"the scale: use about {suggestion:.3g} here (its value for a "
+            f"unit-area surface, rescaled), or rescale the surface "
+            f"(NormalizeArea)")
+
+
 def _check_weight(value, name: str) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or \
             not math.isfinite(value) or value < 0:
@@ -120,7 +141,8 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
     Args:
         data (Data): ``pos`` :math:`(N, 3)`, ``face`` :math:`(3, F)` for a
             mesh (else a point cloud), optionally ``x`` and a hierarchy.
-        alpha (float): Laplacian weight :math:`\alpha \geq 0` (time step).
+        alpha (float): Laplacian weight :math:`\alpha \geq 0` (time step,
+            in units of area: scale it with the surface).
         y (Tensor, optional): The signal; default ``data.x``.
         solver (GravoMG, optional): A solver on the points of ``data``.
         tol (float, optional): Relative residual to reach in every
@@ -152,6 +174,8 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
         raise ValueError(f"{int((m <= 0).sum())} point(s) have no area, so "
                          f"M is singular; remove unreferenced vertices and "
                          f"degenerate triangles")
+    if alpha > 0:
+        _check_scale(S, m, 1.0, alpha, 'alpha', alpha * m.sum())
     A = sp.diags(m) + alpha * S
     if beta > 0:
         A = A + beta * (S @ sp.diags(1.0 / m) @ S)
@@ -178,7 +202,8 @@ def poisson(data, eta: float, y: Optional[Tensor] = None,
 
     Args:
         data (Data): As in :func:`smooth`.
-        eta (float): Screening weight :math:`\eta > 0`.
+        eta (float): Screening weight :math:`\eta > 0`, in units of
+            1 / area (scale it with the surface).
         y (Tensor, optional): The right-hand side; default ``data.x``.
 
     Shapes:
@@ -190,5 +215,7 @@ def poisson(data, eta: float, y: Optional[Tensor] = None,
         raise ValueError(f"'eta' must be positive (S alone is singular), "
                          f"got {eta!r}")
     S, m = stiffness_and_mass(data, robust)
+    if (m > 0).all():
+        _check_scale(S, m, eta, 1.0, 'eta', eta / m.sum())
     return _solve(data, (S + eta * sp.diags(m)).tocsr(), m, y, solver, tol,
                   ratio, lower_bound, cycle, max_iter)

@@ -2,7 +2,10 @@ from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
-from tg_intrinsic.geometry.pointcloud.mls import build_mls_operators
+from tg_intrinsic.geometry.checks import (check_positive_float,
+                                          check_positive_int)
+from tg_intrinsic.geometry.pointcloud.mls import (MIN_MLS_NEIGHBOURS,
+                                                  build_mls_operators)
 from tg_intrinsic.surface_attributes import mls_parameters, resolve_frames
 
 
@@ -32,8 +35,8 @@ class MLSOperators(BaseTransform):
     PyG batching needs nothing special.
 
     Args:
-        k (int, optional): Neighbours, the point itself included.
-            (default: :obj:`20`)
+        k (int, optional): Neighbours, the point itself included (at least
+            3). (default: :obj:`20`)
         regularizer (float, optional): Tikhonov weight :math:`\lambda`.
             (default: :obj:`1e-3`)
         kernel_width (float, optional): Gaussian width relative to the mean
@@ -43,9 +46,10 @@ class MLSOperators(BaseTransform):
     """
     def __init__(self, k: int = 20, regularizer: float = 1e-3,
                  kernel_width: float = 1.0, normalized: bool = True):
-        self.k = k
-        self.regularizer = regularizer
-        self.kernel_width = kernel_width
+        self.k = check_positive_int(k, 'k', minimum=MIN_MLS_NEIGHBOURS)
+        self.regularizer = check_positive_float(regularizer, 'regularizer')
+        self.kernel_width = check_positive_float(kernel_width,
+                                                 'kernel_width')
         self.normalized = normalized
 
     def forward(self, data: Data) -> Data:

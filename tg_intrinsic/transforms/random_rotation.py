@@ -8,6 +8,9 @@ from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
+from tg_intrinsic.geometry.checks import check_points
+from tg_intrinsic.surface_attributes import given_normals
+
 _AXES = {'x': 0, 'y': 1, 'z': 2}
 AXES = ('x', 'y', 'z', 'xyz')
 _LEVEL = re.compile(r'_[1-9][0-9]*$')
@@ -85,21 +88,31 @@ class RandomRotation(BaseTransform):
         self.max_angle = float(max_angle)
 
     def forward(self, data: Data) -> Data:
-        pos = getattr(data, 'pos', None)
-        if pos is None or pos.dim() != 2 or pos.size(-1) != 3:
+        if getattr(data, 'pos', None) is None:
             raise ValueError("RandomRotation needs 'data.pos' of shape "
                              "[N, 3]")
+        pos = check_points(data.pos, 'data.pos')
+        given_normals(data)  # normals / frames must match pos
         data = data.clone()
         matrix = random_rotation_matrix(
             self.axis, max_angle=self.max_angle).to(pos.device, pos.dtype)
         for key, value in data.to_dict().items():
             name = _LEVEL.sub('', key)  # pos_1 -> pos
-            if not isinstance(value, Tensor) or value.size(-1) != 3:
+            if name not in ('pos', 'normal', 'norm', 'frame') \
+                    or not isinstance(value, Tensor):
                 continue
-            if name in ('pos', 'normal', 'norm') and value.dim() == 2:
-                data[key] = value @ matrix.T
-            elif name == 'frame' and value.dim() == 3:
-                data[key] = value @ matrix.T
+            level_pos = 'pos' + key[len(name):]  # normal_1 -> pos_1
+            rows = data[level_pos].size(0) if level_pos in data else None
+            shape = [rows, 3, 3] if name == 'frame' else [rows, 3]
+            if value.dim() != len(shape) or value.shape[1:] != \
+                    torch.Size(shape[1:]) or (rows is not None
+                                              and value.size(0) != rows):
+                raise ValueError(f"'data.{key}' must have shape "
+                                 f"{shape} (rows: one per point), got "
+                                 f"{list(value.shape)}")
+            check_points(value.reshape(-1, 3), f'data.{key}',
+                         min_points=0)
+            data[key] = value @ matrix.T.to(value.dtype)
         return data
 
     def __repr__(self) -> str:

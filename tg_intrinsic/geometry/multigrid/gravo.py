@@ -426,7 +426,9 @@ def gravo_hierarchy(pos: np.ndarray, edge_index: np.ndarray,
                     weighting: str = 'barycentric', voronoi: str = 'exact'
                     ) -> List[GravoLevel]:
     """Coarsens with :func:`gravo_level` while the next level would keep at
-    least ``lower_bound`` points, at most ``max_levels`` times."""
+    least ``lower_bound`` points, at most ``max_levels`` times. A level
+    that keeps every point (all points coincide, so no sample covers
+    another) ends the hierarchy: it would repeat forever."""
     check_options(ratio, weighting, voronoi)
     pos, edge_index = _check_graph(pos, edge_index)
     graph = _csr(edge_index, pos.shape[0])
@@ -434,7 +436,8 @@ def gravo_hierarchy(pos: np.ndarray, edge_index: np.ndarray,
     while len(levels) < max_levels and pos.shape[0] > lower_bound:
         level, *graph = _coarsen(pos, *graph, ratio, shift, weighting,
                                  voronoi)
-        if level.sample.size < lower_bound:
+        if level.sample.size < lower_bound \
+                or level.sample.size >= pos.shape[0]:
             break
         levels.append(level)
         pos = level.pos

@@ -25,7 +25,13 @@ from numba import njit, prange
 from torch import Tensor
 
 from ..checks import (check_batch, check_edge_index, check_points,
-                      check_positive_float, check_tensor, same_device)
+                      check_positive_float, check_positive_int, check_tensor,
+                      same_device)
+
+#: Fewest points of an MLS neighbourhood (the point included): a tangent
+#: gradient needs the point and two neighbours off its line; with fewer the
+#: weights are all zero.
+MIN_MLS_NEIGHBOURS = 3
 
 #: Monomials of the quadratic fit: 1, u, v, u^2, sqrt(2) uv, v^2. The factor
 #: sqrt(2) makes the Tikhonov term rotation invariant (the quadratic part is a
@@ -200,6 +206,7 @@ def build_mls_operators(pos: Tensor, k: int = 20,
     from .neighbors import knn
 
     pos = check_points(pos)
+    k = check_positive_int(k, 'k', minimum=MIN_MLS_NEIGHBOURS)
     if frame is not None:
         frame = check_frames(frame, pos.size(0), pos)
     else:

@@ -190,6 +190,37 @@ def test_degenerate_and_malformed_faces_raise():
         cotan_laplacian(pos * float('nan'), torch.tensor([[0], [1], [3]]))
     with pytest.raises(ValueError, match='float32 or float64'):
         lumped_mass(pos.long(), torch.tensor([[0], [1], [3]]))
+    with pytest.raises(ValueError, match='no triangles'):
+        cotan_laplacian(pos, torch.zeros(3, 0, dtype=torch.long))
+
+
+def test_zero_area_triangles_raise_wherever_areas_are_used():
+    from tg_intrinsic.solvers import poisson, smooth, stiffness_and_mass
+    from tg_intrinsic.transforms import NormalizeArea
+    from torch_geometric.data import Data
+    pos, face = icosphere(1)
+    # a sliver: a vertex on the midpoint of an edge, in a triangle of its own
+    a, b = int(face[0, 0]), int(face[1, 0])
+    pos = torch.cat([pos, 0.5 * (pos[a] + pos[b])[None]])
+    face = torch.cat([face, torch.tensor([[a], [b], [pos.size(0) - 1]])], 1)
+    areas = face_areas(pos, face)  # reports the sliver as 0, to find it
+    assert float(areas[-1]) < 1e-15 and bool((areas[:-1] > 0).all())
+    data = Data(pos=pos, face=face, x=torch.ones(pos.size(0), 1,
+                                                 dtype=pos.dtype))
+    for call in (lambda: face_normals(pos, face),
+                 lambda: vertex_normals(pos, face),
+                 lambda: lumped_mass(pos, face),
+                 lambda: cotan_laplacian(pos, face),
+                 lambda: normalize_area(pos, face),
+                 lambda: NormalizeArea()(data),
+                 lambda: stiffness_and_mass(data, robust=False),
+                 lambda: smooth(data, 1e-2, robust=False),
+                 lambda: poisson(data, 1.0, robust=False)):
+        with pytest.raises(ValueError, match='zero-area'):
+            call()
+    # the robust Laplacian is built for such meshes (intrinsic Delaunay)
+    S, m = stiffness_and_mass(data, robust=True)
+    assert np.isfinite(S.data).all() and bool((m > 0).all())
 
 
 def test_laplacian_spectrum_of_the_sphere_and_its_invariances():

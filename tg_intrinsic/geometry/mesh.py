@@ -33,11 +33,24 @@ def _cross_and_scale(pos: Tensor, face: Tensor) -> Tuple[Tensor, Tensor]:
     return cross, scale
 
 
+def _nondegenerate_areas(pos: Tensor, face: Tensor) -> Tensor:
+    """Triangle areas, refusing zero-area triangles (the functions that
+    divide by areas or normalise by them)."""
+    cross, scale = _cross_and_scale(pos, face)
+    area = 0.5 * cross.norm(dim=-1)
+    check_nondegenerate(area, scale)
+    return area
+
+
 def face_areas(pos: Tensor, face: Tensor) -> Tensor:
     r"""Area of every triangle,
     :math:`A_f = \frac{1}{2} \| (p_1 - p_0) \times (p_2 - p_0) \|`.
 
-    Degenerate triangles have area 0 (this is well defined, so no error).
+    Degenerate triangles have area 0 (this is well defined, so no error:
+    use it to find them). Every function that divides by areas or
+    normalises by them (:func:`face_normals`, :func:`vertex_normals`,
+    :func:`lumped_mass`, :func:`cotan_weights`, :func:`cotan_laplacian`,
+    :func:`normalize_area`) raises :class:`ValueError` on them instead.
 
     Args:
         pos (torch.Tensor): Vertex positions.
@@ -117,7 +130,7 @@ def lumped_mass(pos: Tensor, face: Tensor) -> Tensor:
 
     The entries sum to the surface area. Raises :class:`ValueError` on
     unreferenced vertices, which would get a zero mass (and an infinite
-    inverse).
+    inverse), and on zero-area triangles.
 
     Shapes:
         - **input:** pos :math:`(N, 3)`, face :math:`(3, F)`
@@ -125,7 +138,7 @@ def lumped_mass(pos: Tensor, face: Tensor) -> Tensor:
     """
     pos, face = _check_mesh(pos, face)
     _check_referenced(face, pos.size(0))
-    area = face_areas(pos, face) / 3.0
+    area = _nondegenerate_areas(pos, face) / 3.0
     mass = torch.zeros(pos.size(0), dtype=pos.dtype, device=pos.device)
     for corner in range(3):
         mass.index_add_(0, face[corner], area)
@@ -185,6 +198,9 @@ def cotan_laplacian(pos: Tensor, face: Tensor) -> Tensor:
         - **output:** coalesced sparse COO tensor :math:`(N, N)`
     """
     pos, face = _check_mesh(pos, face)
+    if face.size(1) == 0:
+        raise ValueError("'face' holds no triangles, so there is no "
+                         "Laplacian to build")
     half_cot = cotan_weights(pos, face)  # [F, 3]
     i = torch.cat([face[1], face[2], face[0]])  # edge opposite corner 0, 1, 2
     j = torch.cat([face[2], face[0], face[1]])
@@ -310,6 +326,8 @@ def normalize_area(pos: Tensor, face: Tensor, area: float = 1.0) -> Tensor:
     given total surface area,
     :math:`p_i \leftarrow \sqrt{A^* / A} \, (p_i - c)`.
 
+    Raises :class:`ValueError` on zero-area triangles.
+
     Args:
         area (float, optional): Target surface area. (default: :obj:`1.0`)
 
@@ -319,7 +337,7 @@ def normalize_area(pos: Tensor, face: Tensor, area: float = 1.0) -> Tensor:
     """
     pos, face = _check_mesh(pos, face)
     area = check_positive_float(area, 'area')
-    face_area = face_areas(pos, face)
+    face_area = _nondegenerate_areas(pos, face)
     total = face_area.sum()
     if not bool(total > torch.finfo(pos.dtype).tiny):
         raise ValueError("the mesh has zero surface area; cannot normalise it")

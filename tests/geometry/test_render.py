@@ -7,20 +7,32 @@ import math
 import numpy as np
 import pytest
 import torch
+from numba import njit
 
 from tg_intrinsic.geometry.appearance.envmap import (equirect_directions,
                                           equirect_lookup,
                                           equirect_solid_angles)
 from tg_intrinsic.datasets.capture import render_images
 from tg_intrinsic.geometry.appearance.cameras import camera_centers
-from tg_intrinsic.geometry.appearance.lighting import (_lookup_numpy,
-                                                       render_radiance)
+from tg_intrinsic.geometry.appearance import lighting
+from tg_intrinsic.geometry.appearance.lighting import render_radiance
 from tg_intrinsic.geometry.appearance.raster import (point_visibility,
                                                      rasterize)
 from tg_intrinsic.geometry.appearance.sh import (
     principled_to_torrance_sparrow, schlick_fresnel, smith_g1)
 
 D64 = torch.float64
+
+
+@njit(cache=True)
+def kernel_lookup(env, dirs):
+    """The per-sample lookup the shading kernels inline."""
+    out = np.empty((dirs.shape[0], 3))
+    for k in range(dirs.shape[0]):
+        row, col = lighting._env_coords(dirs[k, 0], dirs[k, 1], dirs[k, 2],
+                                        env.shape[0], env.shape[1])
+        out[k, 0], out[k, 1], out[k, 2] = lighting._bilinear(env, row, col)
+    return out
 
 
 def unit(x):
@@ -89,7 +101,7 @@ def test_numba_lookup_matches_torch():
     poles = torch.tensor([[0, 0, 1.0], [0, 0, -1.0], [-1.0, 0, 0],
                           [-1.0, -1e-17, 0]], dtype=D64)
     d = torch.cat([d, poles])
-    np.testing.assert_allclose(_lookup_numpy(env.numpy(), d.numpy()),
+    np.testing.assert_allclose(kernel_lookup(env.numpy(), d.numpy()),
                                equirect_lookup(env, d).numpy(), atol=1e-13)
 
 
@@ -347,3 +359,14 @@ def test_render_images_background_and_bad_input():
         rasterize(V, F.t(), K, E, 24, 24)
     with pytest.raises(ValueError, match='intrinsics'):
         rasterize(V, F, K[:2], E, 24, 24)
+
+
+def test_kernel_smith_g1_is_the_appearance_packages():
+    # the shading kernels inline a scalar copy (numba cannot call torch)
+    cos = torch.linspace(-0.2, 1.0, 61, dtype=D64)
+    for alpha in (0.05, 0.3, 0.9):
+        ours = torch.tensor([lighting._smith_g1(float(c), alpha ** 2)
+                             for c in cos], dtype=D64)
+        torch.testing.assert_close(
+            ours, smith_g1(cos, torch.tensor(alpha, dtype=D64)),
+            rtol=1e-14, atol=1e-15)

@@ -32,7 +32,7 @@ from torch import Tensor
 
 from ..checks import (check_points, check_positive_int, check_seed,
                       check_tensor, check_unit_interval, check_unit_rows)
-from .envmap import check_envmap
+from .envmap import check_envmap, equirect_lookup
 from .sh import principled_to_torrance_sparrow
 
 __all__ = ['render_radiance']
@@ -97,20 +97,13 @@ def _bilinear(env, row, col):  # pragma: no cover (numba)
     return r, g, b
 
 
-@njit(cache=True, parallel=True)
-def _lookup_kernel(env, dirs):  # pragma: no cover (numba)
-    out = np.empty((dirs.shape[0], 3))
-    for k in prange(dirs.shape[0]):
-        row, col = _env_coords(dirs[k, 0], dirs[k, 1], dirs[k, 2],
-                               env.shape[0], env.shape[1])
-        out[k, 0], out[k, 1], out[k, 2] = _bilinear(env, row, col)
-    return out
-
-
-def _lookup_numpy(env: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-    """The compiled bilinear lookup (for tests against the torch one)."""
-    return _lookup_kernel(np.ascontiguousarray(env, dtype=np.float64),
-                          np.ascontiguousarray(dirs, dtype=np.float64))
+def _lookup(env: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """The appearance package's bilinear equirectangular lookup on numpy
+    arrays (the kernels inline the same rule per sample: _env_coords,
+    _bilinear)."""
+    return equirect_lookup(torch.from_numpy(np.asarray(env, np.float64)),
+                           torch.from_numpy(np.asarray(dirs, np.float64))
+                           ).numpy()
 
 
 @njit(cache=True, inline='always')
@@ -185,7 +178,7 @@ def _diffuse_tables(env: np.ndarray, min_rows: int):
     if factor == 1:
         radiance = env
     else:
-        radiance = _lookup_numpy(env, dirs.reshape(-1, 3)).reshape(hq, wq, 3)
+        radiance = _lookup(env, dirs.reshape(-1, 3)).reshape(hq, wq, 3)
     weight = radiance * equirect_solid_angles(hq, wq).numpy()[..., None]
     # Cells of b x b pixels: a cell entirely above (below) the horizon of
     # a normal contributes n . (sum of w_p d_p) (nothing), because the
@@ -590,7 +583,7 @@ def render_radiance(normal: Tensor, base_color: Tensor, metallic: Tensor,
         grid = equirect_directions(128, 256).numpy().reshape(-1, 3)
         table = _irradiance_kernel(grid, dirs, weight, cells, moment, centre,
                                    sin_radius).reshape(128, 256, 3)
-        irradiance[shaded] = _lookup_numpy(table, normal_np[shaded])
+        irradiance[shaded] = _lookup(table, normal_np[shaded])
     elif shaded.any():
         irradiance[shaded] = _irradiance_kernel(
             np.ascontiguousarray(normal_np[shaded]), dirs, weight, cells,

@@ -1,3 +1,4 @@
+import math
 import os
 
 import numpy as np
@@ -33,6 +34,15 @@ def grid_mesh(n=6, jitter=0.0, seed=0, dtype=torch.float64):
     c, d = idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
     face = np.concatenate([np.stack([a, b, c]), np.stack([a, c, d])], 1)
     return torch.tensor(pos, dtype=dtype), torch.tensor(face, dtype=torch.long)
+
+
+def fibonacci_sphere(n, dtype=torch.float64):
+    """n points of a Fibonacci spiral on the unit sphere."""
+    i = torch.arange(n, dtype=dtype) + 0.5
+    phi = torch.acos(1 - 2 * i / n)
+    theta = math.pi * (1 + 5 ** 0.5) * i
+    return torch.stack([torch.cos(theta) * torch.sin(phi),
+                        torch.sin(theta) * torch.sin(phi), torch.cos(phi)], 1)
 
 
 @pytest.fixture

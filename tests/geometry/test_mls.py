@@ -7,7 +7,7 @@ from tg_intrinsic.geometry import knn, tangent_frames
 from tg_intrinsic.geometry.pointcloud import operators as ops
 from tg_intrinsic.geometry.pointcloud.mls import mls_grad_div
 from tg_intrinsic.geometry.pointcloud.operators import SurfaceOperators
-from tests.geometry.test_frames import fibonacci_sphere
+from tests.conftest import fibonacci_sphere
 
 
 def build(pos, normal, k=20, batch=None, **kwargs):

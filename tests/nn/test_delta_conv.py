@@ -12,7 +12,7 @@ from tg_intrinsic.nn import DeltaConv, VectorLinear, VectorMLP, VectorNonLin
 from tg_intrinsic.nn.models import (DeltaNetClassification,
                                     DeltaNetSegmentation)
 from tg_intrinsic.transforms import MLSOperators
-from tests.geometry.test_frames import fibonacci_sphere
+from tests.conftest import fibonacci_sphere
 
 
 def blob(n=300, seed=0, dtype=torch.float64):

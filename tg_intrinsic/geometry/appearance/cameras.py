@@ -33,9 +33,8 @@ def project(pos: Tensor, intrinsics: Tensor, extrinsics: Tensor):
         + extrinsics[:, None, :, 3]
     depth = cam[..., 2]
     safe = torch.where(depth.abs() > 0, depth, torch.ones_like(depth))
-    uv = cam[..., :2] / safe.unsqueeze(-1)
-    uv = uv * intrinsics[:, None, [0, 1], [0, 1]] + intrinsics[:, None, [0, 1],
-                                                               [2, 2]]
+    # the whole K, skew included: u = fx x/z + s y/z + cx, v = fy y/z + cy
+    uv = (cam / safe.unsqueeze(-1)) @ intrinsics[:, :2].transpose(1, 2)
     return uv, depth
 
 

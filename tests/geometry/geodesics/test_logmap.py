@@ -19,7 +19,7 @@ from tg_intrinsic.geometry.geodesics import vector_heat as _vector_heat
 from tests.conftest import grid_mesh, icosphere
 from tests.geometry.test_bad_input import (SETTINGS, assert_valid, call,
                                            face_arrays, point_arrays)
-from tests.geometry.test_frames import fibonacci_sphere
+from tests.conftest import fibonacci_sphere
 
 
 needs_pp3d = pytest.mark.skipif(

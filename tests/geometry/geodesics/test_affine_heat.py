@@ -17,7 +17,7 @@ from tg_intrinsic.geometry.geodesics.affine_heat import (AffineHeatPatch,
                                                 MeshTangentData, SparseLU)
 
 from tests.conftest import grid_mesh, icosphere
-from tests.geometry.test_logmap import sphere_truth
+from tests.geometry.geodesics.test_logmap import sphere_truth
 
 
 def wrap(angle):

@@ -9,13 +9,7 @@ from torch_geometric.transforms import SamplePoints
 from tg_intrinsic.datasets import SyntheticModelNet, SyntheticSHREC
 from tg_intrinsic.geometry import estimate_normals, tangent_frames
 
-
-def fibonacci_sphere(n, dtype=torch.float64):
-    i = torch.arange(n, dtype=dtype) + 0.5
-    phi = torch.acos(1 - 2 * i / n)
-    theta = math.pi * (1 + 5 ** 0.5) * i
-    return torch.stack([torch.cos(theta) * torch.sin(phi),
-                        torch.sin(theta) * torch.sin(phi), torch.cos(phi)], 1)
+from tests.conftest import fibonacci_sphere
 
 
 @pytest.mark.parametrize('dtype', [torch.float32, torch.float64])

@@ -259,3 +259,39 @@ def test_neighbor_max_regular_and_irregular(sphere_ops, backend):
     v = torch.randn(pos.size(0), 4, 2, dtype=pos.dtype)
     assert torch.allclose(S2.div(v), ops.div(v, sub, dw[keep][perm]))
     assert torch.allclose(S2.grad(x), ops.grad(x, sub, gw[keep][perm]))
+
+
+def test_surface_operators_reject_bad_graphs_and_weights():
+    pos = fibonacci_sphere(50)
+    ei = knn(pos, 5, loop=True)
+    gw, dw = mls_grad_div(pos, tangent_frames(pos), ei)
+    nan = dw.clone()
+    nan[4, 1] = float('nan')
+    negative = ei.clone()
+    negative[0, 7] = -3
+    cases = [
+        (lambda: SurfaceOperators(ei, gw, dw, 40),
+         r"'edge_index' holds indices in \[0, 49\], outside \[0, 40\)"),
+        (lambda: SurfaceOperators(negative, gw, dw, 50), 'outside'),
+        (lambda: SurfaceOperators(ei.float(), gw, dw, 50), 'torch.long'),
+        (lambda: SurfaceOperators(ei, gw[:, :1], dw, 50),
+         r"'grad_weight' must have shape \[250, 2\]"),
+        (lambda: SurfaceOperators(ei, gw, dw[:-1], 50),
+         r"'div_weight' must have shape \[250, 2\]"),
+        (lambda: SurfaceOperators(ei, gw, nan, 50),
+         "'div_weight' contains NaN"),
+        (lambda: SurfaceOperators(ei, gw.long(), dw, 50), 'float tensor'),
+        (lambda: SurfaceOperators(ei, gw, dw, -1),
+         "'num_nodes' must be at least 0"),
+    ]
+    for call, match in cases:
+        with pytest.raises(ValueError, match=match):
+            call()
+    S = SurfaceOperators(ei, gw, dw, 50)
+    short = torch.randn(30, 2, dtype=pos.dtype)
+    for call in (S.grad, S.neighbor_max, S.neighbor_sum):
+        with pytest.raises(ValueError, match="'x' has 30 rows but there "
+                                             "are 50 nodes in the operators"):
+            call(short)
+    with pytest.raises(ValueError, match="'v' has 30 rows"):
+        S.div(torch.randn(30, 2, 2, dtype=pos.dtype))

@@ -277,3 +277,67 @@ def test_centralized_layer_in_linear_time_matches_per_edge(train):
     g1, = torch.autograd.grad(out.square().sum(), x)
     g2, = torch.autograd.grad(ref.square().sum(), x)
     assert torch.allclose(g1, g2, rtol=1e-8, atol=1e-9)
+
+
+def test_delta_conv_explains_missing_or_mismatched_inputs(monkeypatch):
+    pos, normal = blob(60)
+    ei, ops = operators(pos, tangent_frames(normal), k=6)
+    x = torch.randn(60, 3, dtype=torch.float64)
+    v = ops.grad(x)
+    conv = DeltaConv(3, 8).double()
+    # Nothing may reach the sparse products or numba sweeps first.
+    from tg_intrinsic.geometry.sparse import SparseMM
+
+    def fail(*args):
+        raise AssertionError('a sparse kernel ran before the input checks')
+
+    monkeypatch.setattr(SparseMM, 'apply', fail)
+    cases = [
+        (lambda: conv(x, None, ei, ops),
+         r"'v' is None, but this layer has a vector stream: pass vector "
+         r"features \[N, 3, 2\]; for a first layer use v = "
+         r"operators.grad\(x\)"),
+        (lambda: conv(x, v, ei, None),
+         "'operators' is None, but this layer has a vector stream: pass "
+         "SurfaceOperators"),
+        (lambda: conv(x[:40], v[:40], ei, ops),
+         "'x' has 40 rows but there are 60 nodes in 'operators'"),
+        (lambda: conv(x, v[:, :2], ei, ops), r"'v' must be vector features"),
+        (lambda: conv(x[:, :2], v, ei, ops), r"'x' must be float scalar "
+                                             r"features \[N, 3\]"),
+        (lambda: conv(x, v, ei.clone() + 1, ops),
+         r"outside \[0, 60\): there are only 60 rows in 'x'"),
+        (lambda: conv(x, v, ei, 'ops'), "'operators' must be "
+                                        "SurfaceOperators"),
+    ]
+    for call, match in cases:
+        with pytest.raises(ValueError, match=match):
+            call()
+    # The scalar-only layer legitimately takes neither v nor operators.
+    monkeypatch.undo()
+    scalar = DeltaConv(3, 8, vector=False, vector_input=False).double()
+    out, vout = scalar(x, None, ei, None)
+    assert out.shape == (60, 8) and vout is None
+    with pytest.raises(ValueError, match=r"outside \[0, 40\)"):
+        scalar(x[:40], None, ei, None)
+
+
+@pytest.mark.parametrize('make,match', [
+    (lambda: DeltaConv(0, 8), "'in_channels' must be at least 1, got 0"),
+    (lambda: DeltaConv(3, 0), "'out_channels' must be at least 1, got 0"),
+    (lambda: DeltaConv(3, 8, depth=0), "'depth' must be at least 1"),
+    (lambda: DeltaConv(3.5, 8), "'in_channels' must be an integer"),
+    (lambda: VectorLinear(0, 2), "'in_channels' must be at least 1"),
+    (lambda: VectorNonLin(0), "'channels' must be at least 1"),
+    (lambda: VectorMLP([3, 0]), r"'channels\[1\]' must be at least 1"),
+    (lambda: VectorMLP([3]), "at least 2 channel count"),
+    (lambda: DeltaNetSegmentation(0, 5), "'in_channels' must be at least"),
+    (lambda: DeltaNetSegmentation(3, 0), "'num_classes' must be at least"),
+    (lambda: DeltaNetSegmentation(3, 5, num_categories=0),
+     "'num_categories' must be at least 1"),
+    (lambda: DeltaNetSegmentation(3, 5, conv_channels=(8, -1)),
+     r"'conv_channels\[1\]' must be at least 1"),
+])
+def test_layer_constructors_need_positive_sizes(make, match):
+    with pytest.raises(ValueError, match=match):
+        make()

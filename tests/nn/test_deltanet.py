@@ -102,3 +102,17 @@ def test_fused_embedding_refuses_a_second_backward():
     out.backward(retain_graph=True)
     with pytest.raises(RuntimeError, match='differentiated once'):
         out.backward()
+
+
+@pytest.mark.parametrize('args,kwargs,match', [
+    ((0, 4), {}, "'in_channels' must be at least 1, got 0"),
+    ((3, 0), {}, "'num_classes' must be at least 1, got 0"),
+    ((3, 4), dict(conv_channels=()), "'conv_channels' must hold at least 1"),
+    ((3, 4), dict(conv_channels=(8, 0)), r"'conv_channels\[1\]' must be"),
+    ((3, 4), dict(embedding_size=0), "'embedding_size' must be at least 1"),
+    ((3, 4), dict(k=0), "'k' must be at least 1"),
+    ((3, 4.0), {}, "'num_classes' must be an integer"),
+])
+def test_constructor_needs_positive_sizes(args, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        DeltaNetClassification(*args, **kwargs)

@@ -217,7 +217,7 @@ def test_flat_grid_matches_continuous_correlation(m):
 
 
 def test_bad_input():
-    with pytest.raises(ValueError, match="'rings' must be an integer"):
+    with pytest.raises(ValueError, match="'rings' must be at least 1"):
         HarmonicConv(2, 2, rings=0)
     conv = HarmonicConv(2, 3, max_order=1, rings=3, prev_order=1)
     edge_index, logmap, transport, weight, radius = random_discs()
@@ -233,3 +233,111 @@ def test_bad_input():
     with pytest.raises(ValueError, match='zero total weight'):
         harmonic_terms(edge_index, logmap, 0 * weight, radius, 3, 1)
     assert 'HarmonicConv(2, 3, max_order=1, rings=3' in repr(conv)
+
+
+def _no_sparse_kernel(monkeypatch):
+    """Makes every sparse product fail loudly: the checks must come first."""
+    from tg_intrinsic.geometry.sparse import SparseMM
+
+    def fail(*args):
+        raise AssertionError('a sparse kernel ran before the input checks')
+
+    monkeypatch.setattr(SparseMM, 'apply', fail)
+
+
+def test_features_must_have_one_row_per_graph_node(monkeypatch):
+    # Fewer rows than nodes used to read past the end of x (values ~1e36).
+    edge_index, logmap, transport, weight, radius = random_discs()
+    harmonic = harmonic_terms(edge_index, logmap, weight, radius, 3, 1)
+    conv = HarmonicConv(2, 3, max_order=1, rings=3).double()
+    short = torch.randn(40, 2, 2, dtype=C128)
+    operator = HarmonicOperator(edge_index, harmonic, transport, 60, 2, 2)
+    _no_sparse_kernel(monkeypatch)
+    for backend in ('sparse', 'message'):
+        with pytest.raises(ValueError, match=r"only 40 rows in 'x'"):
+            conv(short, edge_index, harmonic, transport, backend=backend)
+    with pytest.raises(ValueError, match=r"'x' has 40 rows but there are 60 "
+                                         r"nodes in 'operator'"):
+        conv(short, operator=operator)
+    with pytest.raises(ValueError, match=r"'x' has 40 rows"):
+        operator.aggregate(short)
+    with pytest.raises(ValueError, match="needs 'edge_index'"):
+        conv(short, edge_index)
+    with pytest.raises(ValueError, match='HarmonicOperator'):
+        conv(short, operator='operator')
+    block = HarmonicResNetBlock(2, 2, max_order=1, rings=3, prev_order=1)
+    ops = {(2, 2): operator}
+    with pytest.raises(ValueError, match=r"'z' has 40 rows but there are "
+                                         r"60 nodes in 'operators'"):
+        block(short, ops)
+    with pytest.raises(ValueError, match=r'order pairs \[\(1, 2\)\]'):
+        HarmonicResNetBlock(2, 2, 1, 3, prev_order=0)(short[:, :1], ops)
+
+
+def test_operator_rejects_bad_graphs_and_angles():
+    edge_index, logmap, transport, weight, radius = random_discs()
+    harmonic = harmonic_terms(edge_index, logmap, weight, radius, 3, 1)
+    with pytest.raises(ValueError, match=r'outside \[0, 50\)'):
+        HarmonicOperator(edge_index, harmonic, transport, 50, 2, 2)
+    negative = edge_index.clone()
+    negative[0, 0] = -1
+    with pytest.raises(ValueError, match='outside'):
+        harmonic_operators(negative, harmonic, transport, 60, [(2, 2)])
+    bad = transport.clone()
+    bad[3] = float('nan')
+    with pytest.raises(ValueError, match="'transport' contains NaN"):
+        HarmonicOperator(edge_index, harmonic, bad, 60, 2, 2)
+
+
+@pytest.mark.parametrize('make,match', [
+    (lambda: HarmonicConv(0, 2), "'in_channels' must be at least 1"),
+    (lambda: HarmonicConv(2, 0), "'out_channels' must be at least 1"),
+    (lambda: HarmonicConv(2, 2, max_order=-1), "'max_order' must be at "
+                                                "least 0"),
+    (lambda: HarmonicConv(2.0, 2), "'in_channels' must be an integer"),
+    (lambda: HarmonicResNetBlock(2, 0), "'out_channels' must be at least"),
+    (lambda: ComplexLinear(0, 2), "'in_channels' must be at least 1"),
+    (lambda: ComplexLinear(2, 0), "'out_channels' must be at least 1"),
+    (lambda: ComplexReLU(0), "'channels' must be at least 1"),
+    (lambda: ComplexBatchNorm(2, 0), "'streams' must be at least 1"),
+])
+def test_constructors_need_positive_channel_counts(make, match):
+    with pytest.raises(ValueError, match=match):
+        make()
+
+
+def test_pool_and_unpool_reject_bad_input(monkeypatch):
+    gen = torch.Generator().manual_seed(3)
+    n, n_coarse = 20, 5
+    x = torch.randn(n, 2, 3, dtype=C128, generator=gen)
+    cluster = torch.arange(n) % n_coarse
+    phi = torch.rand(n, dtype=torch.float64, generator=gen)
+    pool, unpool = ParallelTransportPool(), ParallelTransportUnpool()
+    y = pool(x, cluster, phi, n_coarse)
+    nan = phi.clone()
+    nan[2] = float('nan')
+    cases = [
+        # pooling: features, cluster index, angles, cluster count
+        (lambda: pool(x[:, 0], cluster, phi), 'complex stream features'),
+        (lambda: pool(x.real, cluster, phi), 'complex stream features'),
+        (lambda: pool(x, cluster - 1, phi, None), 'negative indices'),
+        (lambda: pool(x, cluster + 1, phi, n_coarse),
+         r"'cluster' holds indices in \[1, 5\], outside \[0, 5\)"),
+        (lambda: pool(x, cluster.double(), phi), 'torch.long'),
+        (lambda: pool(x, cluster[:-1], phi), r'shape \[20\]'),
+        (lambda: pool(x, cluster, nan), "'transport' contains NaN"),
+        (lambda: pool(x, cluster, phi[:-1]), r"'transport' must have "
+                                             r"shape \[20\]"),
+        (lambda: pool(x, cluster, phi, -1), "'num_clusters' must be at"),
+        # unpooling
+        (lambda: unpool(y[:, 0], cluster, phi), 'complex stream features'),
+        (lambda: unpool(y[:3], cluster, phi),
+         r"outside \[0, 3\): there are only 3 rows in 'x'"),
+        (lambda: unpool(y, -cluster, phi), 'outside'),
+        (lambda: unpool(y, cluster.float(), phi), 'torch.long'),
+        (lambda: unpool(y, cluster, nan), "'transport' contains NaN"),
+        (lambda: unpool(y, cluster, phi.long()), 'float tensor'),
+    ]
+    for call, match in cases:
+        with pytest.raises(ValueError, match=match):
+            call()

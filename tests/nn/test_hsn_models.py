@@ -108,3 +108,25 @@ def test_missing_precomputation_is_explained():
         data = two_level_data(1)
         data.x = data.x[:, :2]
         model(data)
+
+
+@pytest.mark.parametrize('Model', [HSNClassification, HSNSegmentation])
+def test_constructors_need_positive_sizes(Model):
+    with pytest.raises(ValueError, match="'in_channels' must be at least 1"):
+        Model(0, 5)
+    with pytest.raises(ValueError, match="'num_classes' must be at least 1"):
+        Model(3, 0)
+    with pytest.raises(ValueError, match="'channels' must hold exactly 2"):
+        Model(3, 5, channels=(4, ))
+    with pytest.raises(ValueError, match=r"'channels\[1\]' must be at least"):
+        Model(3, 5, channels=(4, 0))
+    with pytest.raises(ValueError, match="'rings' must be at least 1"):
+        Model(3, 5, rings=0)
+
+
+def test_pooling_level_mismatch_is_explained():
+    model = HSNClassification(3, 5, rings=RINGS).double()
+    data = two_level_data(1)
+    data.cluster_1 = data.cluster_1.float()
+    with pytest.raises(ValueError, match="'cluster' must hold integer"):
+        model(data)

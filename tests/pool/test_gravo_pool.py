@@ -74,3 +74,37 @@ def test_bad_input():
         GravoUnpool()(x[:3], data.prolong_index_1, data.prolong_weight_1,
                       data.pos.size(0))
     assert repr(GravoPool()) == 'GravoPool()'
+
+
+def test_bad_indices_weights_and_sizes():
+    data = hierarchy(*icosphere(3))
+    index, weight = data.prolong_index_1, data.prolong_weight_1
+    n, m = data.pos.size(0), data.pos_1.size(0)
+    x = torch.randn(n, 2, dtype=torch.float64)
+    y = torch.randn(m, 2, dtype=torch.float64)
+    negative = index.clone()
+    negative[1, 0] = -1
+    nan = weight.clone()
+    nan[0] = float('nan')
+    cases = [
+        (lambda: GravoPool()(x, index, weight, m - 1),
+         rf"outside \[0, {m - 1}\): there are only {m - 1} coarse points"),
+        (lambda: GravoPool()(x, negative, weight, m), 'outside'),
+        (lambda: GravoPool()(x, index.double(), weight, m), 'torch.long'),
+        (lambda: GravoPool()(x, index, nan, m),
+         "'prolong_weight' contains NaN"),
+        (lambda: GravoPool()(x, index, weight, -1),
+         "'num_coarse' must be at least 0"),
+        (lambda: GravoPool()(x.long(), index, weight, m), "'x' must be float"),
+        (lambda: GravoUnpool()(y, index, weight, n - 1),
+         rf"outside \[0, {n - 1}\): there are only {n - 1} fine points"),
+        (lambda: GravoUnpool()(y, negative, weight, n), 'outside'),
+        (lambda: GravoUnpool()(y, index.float(), weight, n), 'torch.long'),
+        (lambda: GravoUnpool()(y, index, nan, n),
+         "'prolong_weight' contains NaN"),
+        (lambda: GravoUnpool()(y, index, weight, 2.5),
+         "'num_fine' must be an integer"),
+    ]
+    for call, match in cases:
+        with pytest.raises(ValueError, match=match):
+            call()

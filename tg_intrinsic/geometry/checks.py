@@ -67,8 +67,9 @@ def check_batch(batch, num_points: int, ref: Tensor) -> Optional[Tensor]:
         return None
     batch = check_tensor(batch, 'batch')
     if batch.dim() != 1 or batch.numel() != num_points:
-        raise ValueError(f"'batch' must have shape [{num_points}] (one example "
-                         f"index per point), got {list(batch.shape)}")
+        raise ValueError(f"'batch' must have shape [{num_points}] (one "
+                         f"example index per point), got "
+                         f"{list(batch.shape)}")
     if batch.dtype != torch.long:
         raise ValueError(f"'batch' must be torch.long, got {batch.dtype}")
     same_device(batch, 'batch', ref)
@@ -100,6 +101,22 @@ def check_positive_int(value, name: str, minimum: int = 1) -> int:
     if value < minimum:
         raise ValueError(f"'{name}' must be at least {minimum}, got {value}")
     return value
+
+
+def check_channels(values, name: str, length: Optional[int] = None,
+                   min_length: int = 1) -> Tuple[int, ...]:
+    """A sequence of positive channel counts (exactly ``length`` if set)."""
+    if isinstance(values, (str, bytes)) or not hasattr(values, '__len__'):
+        raise ValueError(f"'{name}' must be a sequence of channel counts, "
+                         f"got {values!r}")
+    if (length is not None and len(values) != length) \
+            or len(values) < min_length:
+        want = f'exactly {length}' if length is not None \
+            else f'at least {min_length}'
+        raise ValueError(f"'{name}' must hold {want} channel count(s), got "
+                         f"{len(values)}: {list(values)!r}")
+    return tuple(check_positive_int(c, f'{name}[{i}]')
+                 for i, c in enumerate(values))
 
 
 def check_choice(value, name: str, options) -> str:
@@ -163,9 +180,10 @@ def check_nondegenerate(area: Tensor, scale: Tensor, name: str = 'face'):
                          f"update_faces(mesh.nondegenerate_faces())")
 
 
-def check_edge_index(edge_index, num: int, ref: Tensor) -> Tensor:
+def check_edge_index(edge_index, num: int, ref: Tensor,
+                     what: str = 'points', ref_name: str = 'pos') -> Tensor:
     """Validates an ``edge_index [2, E]``: long, on ``ref``'s device, in
-    range."""
+    range; ``what`` names the ``num`` things it indexes."""
     edge_index = check_tensor(edge_index, 'edge_index')
     if edge_index.dim() != 2 or edge_index.size(0) != 2:
         raise ValueError(f"'edge_index' must have shape [2, E], got "
@@ -173,14 +191,63 @@ def check_edge_index(edge_index, num: int, ref: Tensor) -> Tensor:
     if edge_index.dtype != torch.long:
         raise ValueError(f"'edge_index' must be torch.long, got "
                          f"{edge_index.dtype}")
-    same_device(edge_index, 'edge_index', ref)
-    if edge_index.numel() > 0:
-        lo, hi = int(edge_index.min()), int(edge_index.max())
-        if lo < 0 or hi >= num:
-            raise ValueError(f"'edge_index' holds indices in [{lo}, {hi}], "
-                             f"outside [0, {num}): there are only {num} "
-                             f"points")
+    same_device(edge_index, 'edge_index', ref, ref_name)
+    _check_range(edge_index, 'edge_index', num, what)
     return edge_index
+
+
+def check_index(index, name: str, num: Optional[int], ref: Tensor,
+                size: Optional[int] = None, what: str = 'points',
+                ref_name: str = 'x') -> Tensor:
+    """A ``[size]`` long index vector with values in ``[0, num)``."""
+    index = check_tensor(index, name)
+    if index.dim() != 1 or (size is not None and index.numel() != size):
+        want = f'[{size}]' if size is not None else '[N]'
+        raise ValueError(f"'{name}' must have shape {want} (one entry per "
+                         f"point), got {list(index.shape)}")
+    if index.dtype != torch.long:
+        raise ValueError(f"'{name}' must hold integer indices of dtype "
+                         f"torch.long, got {index.dtype}; convert it with "
+                         f"{name}.long()")
+    same_device(index, name, ref, ref_name)
+    _check_range(index, name, num, what)
+    return index
+
+
+def _check_range(index: Tensor, name: str, num: Optional[int], what: str):
+    # Compiled and sparse kernels read out of bounds on such indices.
+    if index.numel() == 0:
+        return
+    lo, hi = int(index.min()), int(index.max())
+    if num is not None and (lo < 0 or hi >= num):
+        raise ValueError(f"'{name}' holds indices in [{lo}, {hi}], outside "
+                         f"[0, {num}): there are only {num} {what}")
+    if lo < 0:
+        raise ValueError(f"'{name}' holds negative indices (down to {lo}); "
+                         f"indices must be >= 0")
+
+
+def check_rows(value: Tensor, name: str, num: int, source: str) -> Tensor:
+    """``value`` must have ``num`` rows, one per node of ``source``."""
+    value = check_tensor(value, name)
+    if value.dim() == 0 or value.size(0) != num:
+        rows = value.size(0) if value.dim() else 0
+        raise ValueError(f"'{name}' has {rows} rows but there are {num} "
+                         f"nodes in {source}; pass one row of '{name}' per "
+                         f"node (features and graph of the same data)")
+    return value
+
+
+def check_streams(z, name: str = 'x') -> Tensor:
+    """Complex stream features ``[N, S, C]`` (Harmonic Surface Networks)."""
+    z = check_tensor(z, name)
+    if z.dim() != 3 or not z.is_complex():
+        raise ValueError(f"'{name}' must be complex stream features "
+                         f"[N, streams, C], got {z.dtype} of shape "
+                         f"{list(z.shape)}; lift real [N, C] features with "
+                         f"torch.complex(x, torch.zeros_like(x))"
+                         f".unsqueeze(1)")
+    return z
 
 
 def check_float_tensor(value, name: str, shape: Sequence[int]) -> Tensor:
@@ -305,16 +372,33 @@ def check_frames(frame, num: int, like: Tensor) -> Tensor:
 
 
 def check_prolongation(x: Tensor, prolong_index: Tensor,
-                       prolong_weight: Tensor, rows: int, side: str):
-    """A prolongation ``[2, nnz]`` (fine, coarse) with one weight per
-    entry, whose ``side`` ('fine' or 'coarse') indexes the rows of x."""
+                       prolong_weight: Tensor, rows: int, side: str,
+                       other: Optional[int] = None):
+    """A prolongation ``[2, nnz]`` (fine, coarse) with one finite weight per
+    entry, whose ``side`` ('fine' or 'coarse') indexes the rows of x and
+    whose other side indexes ``other`` points."""
+    x = check_tensor(x, 'x')
+    if x.dim() == 0 or not (x.is_floating_point() or x.is_complex()):
+        raise ValueError(f"'x' must be float features [N, *], got "
+                         f"{x.dtype} of shape {list(x.shape)}")
+    prolong_index = check_tensor(prolong_index, 'prolong_index')
     if prolong_index.dim() != 2 or prolong_index.size(0) != 2:
         raise ValueError(f"'prolong_index' must be [2, nnz], got "
                          f"{list(prolong_index.shape)}")
+    if prolong_index.dtype != torch.long:
+        raise ValueError(f"'prolong_index' must hold integer indices of "
+                         f"dtype torch.long, got {prolong_index.dtype}")
+    prolong_weight = check_tensor(prolong_weight, 'prolong_weight')
     if prolong_weight.shape != prolong_index.shape[1:]:
         raise ValueError("'prolong_weight' must hold one weight per column "
                          "of 'prolong_index'")
-    index = prolong_index[0 if side == 'fine' else 1]
-    if index.numel() and int(index.max()) >= rows:
-        raise ValueError(f"'prolong_index' refers to {side} point "
-                         f"{int(index.max())} but x has {rows} rows")
+    check_float_tensor(prolong_weight, 'prolong_weight',
+                       prolong_weight.shape)
+    same_device(prolong_index, 'prolong_index', x, 'x')
+    same_device(prolong_weight, 'prolong_weight', x, 'x')
+    _check_range(prolong_index[0 if side == 'fine' else 1], 'prolong_index',
+                 rows, f'rows in x ({side} points)')
+    if other is not None:
+        far = 'coarse' if side == 'fine' else 'fine'
+        _check_range(prolong_index[1 if side == 'fine' else 0],
+                     'prolong_index', other, f'{far} points (num_{far})')

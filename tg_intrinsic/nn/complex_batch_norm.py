@@ -2,6 +2,8 @@ import torch
 from torch import Tensor
 from torch.nn import Parameter
 
+from tg_intrinsic.geometry.checks import check_positive_int
+
 
 class ComplexBatchNorm(torch.nn.Module):
     r"""Batch normalisation of complex stream features on their magnitudes:
@@ -31,8 +33,8 @@ class ComplexBatchNorm(torch.nn.Module):
     def __init__(self, channels: int, streams: int, eps: float = 1e-5,
                  momentum: float = 0.1):
         super().__init__()
-        self.channels = channels
-        self.streams = streams
+        self.channels = check_positive_int(channels, 'channels')
+        self.streams = check_positive_int(streams, 'streams')
         self.eps = eps
         self.momentum = momentum
         self.weight = Parameter(torch.empty(streams, channels))

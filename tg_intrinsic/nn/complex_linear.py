@@ -4,6 +4,8 @@ import torch
 from torch import Tensor
 from torch.nn import Parameter
 
+from tg_intrinsic.geometry.checks import check_positive_int
+
 
 class ComplexLinear(torch.nn.Module):
     r"""A linear map of complex stream features with real weights, applied
@@ -30,6 +32,8 @@ class ComplexLinear(torch.nn.Module):
     def __init__(self, in_channels: int, out_channels: int,
                  bias: bool = True):
         super().__init__()
+        check_positive_int(in_channels, 'in_channels')
+        check_positive_int(out_channels, 'out_channels')
         self.in_channels = in_channels
         self.out_channels = out_channels
         self.weight = Parameter(torch.empty(in_channels, out_channels))

@@ -2,6 +2,8 @@ import torch
 from torch import Tensor
 from torch.nn import Parameter
 
+from tg_intrinsic.geometry.checks import check_positive_int
+
 
 class ComplexReLU(torch.nn.Module):
     r"""The C-ReLU of Harmonic Surface Networks: a ReLU on the magnitude of
@@ -22,7 +24,7 @@ class ComplexReLU(torch.nn.Module):
     """
     def __init__(self, channels: int):
         super().__init__()
-        self.channels = channels
+        self.channels = check_positive_int(channels, 'channels')
         self.bias = Parameter(torch.empty(channels))
         self.reset_parameters()
 

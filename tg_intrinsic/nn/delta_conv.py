@@ -5,6 +5,9 @@ import torch.nn.functional as F
 from torch import Tensor
 from torch_geometric.nn import MLP, MessagePassing
 
+from tg_intrinsic.geometry.checks import (check_edge_index,
+                                          check_positive_int, check_rows,
+                                          check_tensor)
 from tg_intrinsic.geometry.pointcloud.operators import (SurfaceOperators,
                                                         interleaved, planar,
                                                         vector_norm)
@@ -73,6 +76,9 @@ class DeltaConv(MessagePassing):
                  centralized: bool = False, vector: bool = True,
                  aggr: str = 'max', vector_input: bool = True):
         super().__init__(aggr=aggr, flow='source_to_target')
+        check_positive_int(in_channels, 'in_channels')
+        check_positive_int(out_channels, 'out_channels')
+        check_positive_int(depth, 'depth')
         self.in_channels = in_channels
         self.out_channels = out_channels
         self.depth = depth
@@ -113,6 +119,7 @@ class DeltaConv(MessagePassing):
                 operators: Optional[SurfaceOperators]
                 ) -> Tuple[Tensor, Optional[Tensor]]:
         c_in, c_out = self.in_channels, self.out_channels
+        self._check_inputs(x, v, edge_index, operators)
         if self.lin_vector is not None:
             # h0 on [u, J u], u = [v, G x, L_H v]: with W = [W_A, W_B],
             # W [u, J u] = W_A u + J W_B u, one product per block of u.
@@ -159,6 +166,45 @@ class DeltaConv(MessagePassing):
             x_max = self.propagate(edge_index, x=self.mlp_neighbors(x))
         out = out + x_max
         return out, (v if self.lin_vector is not None else None)
+
+    def _check_inputs(self, x, v, edge_index, operators):
+        # Before any sparse product or numba sweep: those read out of
+        # bounds (garbage, not errors) on mismatched sizes.
+        x = check_tensor(x, 'x')
+        if x.dim() != 2 or x.size(1) != self.in_channels \
+                or not x.is_floating_point():
+            raise ValueError(f"'x' must be float scalar features [N, "
+                             f"{self.in_channels}], got {x.dtype} of shape "
+                             f"{list(x.shape)}")
+        if operators is not None:
+            if not isinstance(operators, SurfaceOperators):
+                raise ValueError(f"'operators' must be SurfaceOperators, got "
+                                 f"{type(operators).__name__}")
+            check_rows(x, 'x', operators.num_nodes, "'operators'")
+        elif self.vector_input:
+            raise ValueError("'operators' is None, but this layer has a "
+                             "vector stream: pass SurfaceOperators(edge_"
+                             "index, grad_weight, div_weight, N) built on "
+                             "the same points (or build the layer with "
+                             "vector=False, vector_input=False)")
+        if self.vector_input:
+            if v is None:
+                raise ValueError(f"'v' is None, but this layer has a vector "
+                                 f"stream: pass vector features [N, "
+                                 f"{self.in_channels}, 2]; for a first layer "
+                                 f"use v = operators.grad(x) (as DeltaNet "
+                                 f"does), or build the layer with "
+                                 f"vector=False, vector_input=False")
+            v = check_tensor(v, 'v')
+            if tuple(v.shape) != (x.size(0), self.in_channels, 2):
+                raise ValueError(f"'v' must be vector features [N, C_in, 2] "
+                                 f"= {[x.size(0), self.in_channels, 2]}, got "
+                                 f"{list(v.shape)}")
+        if operators is None or edge_index is not operators.source_edge_index:
+            # The operators checked their own graph when they were built.
+            check_edge_index(edge_index, x.size(0), x,
+                             "rows in 'x' (one per node of the graph)",
+                             ref_name='x')
 
     def _centralized_max(self, x: Tensor,
                          operators: SurfaceOperators) -> Tensor:

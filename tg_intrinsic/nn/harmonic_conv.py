@@ -6,6 +6,9 @@ from torch import Tensor
 from torch.nn import Parameter
 from torch_geometric.nn import MessagePassing
 
+from tg_intrinsic.geometry.checks import (check_edge_index,
+                                          check_positive_int, check_rows,
+                                          check_tensor)
 from tg_intrinsic.geometry.geodesics.harmonic import HarmonicOperator
 
 
@@ -28,8 +31,8 @@ class HarmonicConv(MessagePassing):
     invariant.
 
     The neighbourhoods are aggregated first through a sparse
-    :class:`~tg_intrinsic.geometry.geodesics.harmonic.HarmonicOperator` and contracted
-    with the weights afterwards, so memory grows with
+    :class:`~tg_intrinsic.geometry.geodesics.harmonic.HarmonicOperator` and
+    contracted with the weights afterwards, so memory grows with
     :math:`N \cdot Q \cdot \text{orders}^2 \cdot C`, never with
     :math:`E \cdot Q \cdot \text{orders}^2 \cdot C`; ``backend='message'``
     runs the same maths as per-edge messages (the reference).
@@ -70,9 +73,7 @@ class HarmonicConv(MessagePassing):
                                  ('rings', rings, 1),
                                  ('max_order', max_order, 0),
                                  ('prev_order', prev_order, 0)):
-            if not isinstance(value, int) or value < low:
-                raise ValueError(f"'{name}' must be an integer >= {low}, got "
-                                 f"{value!r}")
+            check_positive_int(value, name, minimum=low)
         self.in_channels = in_channels
         self.out_channels = out_channels
         self.max_order = max_order
@@ -125,20 +126,28 @@ class HarmonicConv(MessagePassing):
         ``transport``, or an ``operator`` built once on them and shared by
         several layers."""
         x = self._complex_input(x)
-        if backend == 'message':
+        if backend == 'sparse' and operator is not None:
+            if not isinstance(operator, HarmonicOperator):
+                raise ValueError(f"'operator' must be a HarmonicOperator, "
+                                 f"got {type(operator).__name__}")
+            check_rows(x, 'x', operator.num_nodes, "'operator'")
+        elif backend in ('sparse', 'message'):
             if edge_index is None or harmonic is None or transport is None:
-                raise ValueError("backend='message' needs edge_index, "
-                                 "harmonic and transport")
+                raise ValueError(f"backend={backend!r} needs 'edge_index', "
+                                 f"'harmonic' and 'transport'" +
+                                 (", or a prebuilt 'operator'"
+                                  if backend == 'sparse' else ''))
+            # The sparse product would read past the end of x otherwise.
+            check_edge_index(edge_index, x.size(0), x,
+                             "rows in 'x' (one per node of the graph)",
+                             ref_name='x')
+        if backend == 'message':
             y = self.propagate(edge_index, x=x.flatten(1), harmonic=harmonic,
                                transport=transport, size=None)
             y = y.view(x.size(0), self.rings, self.prev_order + 1,
                        self.max_order + 1, self.in_channels)
         elif backend == 'sparse':
             if operator is None:
-                if edge_index is None or harmonic is None \
-                        or transport is None:
-                    raise ValueError("pass 'operator', or 'edge_index', "
-                                     "'harmonic' and 'transport'")
                 operator = HarmonicOperator(
                     edge_index, harmonic, transport, x.size(0),
                     self.prev_order + 1, self.max_order + 1)
@@ -170,6 +179,7 @@ class HarmonicConv(MessagePassing):
         return msg.flatten(1)
 
     def _complex_input(self, x: Tensor) -> Tensor:
+        check_tensor(x, 'x')
         if not x.is_complex():
             if x.dim() != 2:
                 raise ValueError("real input must be [N, C] (stream 0)")

@@ -1,6 +1,7 @@
 import torch
 from torch import Tensor
 
+from tg_intrinsic.geometry.checks import check_positive_int, check_rows
 from tg_intrinsic.geometry.geodesics.harmonic import (HarmonicOperator,
                                              harmonic_layout)
 from tg_intrinsic.nn.complex_batch_norm import ComplexBatchNorm
@@ -44,6 +45,11 @@ class HarmonicResNetBlock(torch.nn.Module):
                  max_order: int = 1, rings: int = 6, prev_order: int = 1,
                  batch_norm: bool = True, separate_streams: bool = True):
         super().__init__()
+        for name, value, low in (('in_channels', in_channels, 1),
+                                 ('out_channels', out_channels, 1),
+                                 ('max_order', max_order, 0),
+                                 ('prev_order', prev_order, 0)):
+            check_positive_int(value, name, minimum=low)
         self.in_channels = in_channels
         self.out_channels = out_channels
         self.max_order = max_order
@@ -74,6 +80,15 @@ class HarmonicResNetBlock(torch.nn.Module):
         :class:`HarmonicOperator` of this level (see
         :func:`harmonic_operators`)."""
         p, o = self.prev_order + 1, self.max_order + 1
+        missing = [pair for pair in ((p, o), (o, o))
+                   if not isinstance(operators, dict) or pair not in operators]
+        if missing:
+            raise ValueError(f"'operators' must be a dict holding the "
+                             f"HarmonicOperator of this level for the order "
+                             f"pairs {missing}; build it with "
+                             f"harmonic_operators(..., pairs={missing})")
+        # Checked here so that the error names this block's input.
+        check_rows(z, 'z', operators[(p, o)].num_nodes, "'operators'")
         h = self.act1(self.norm1(self.conv1(z, operator=operators[(p, o)])))
         h = self.norm2(self.conv2(h, operator=operators[(o, o)]))
         skip = z

@@ -3,6 +3,7 @@ import math
 import torch
 from torch import Tensor
 
+from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.geometry.pointcloud.operators import interleaved, planar
 
 
@@ -25,6 +26,8 @@ class VectorLinear(torch.nn.Module):
     """
     def __init__(self, in_channels: int, out_channels: int):
         super().__init__()
+        check_positive_int(in_channels, 'in_channels')
+        check_positive_int(out_channels, 'out_channels')
         self.in_channels = in_channels
         self.out_channels = out_channels
         self.weight = torch.nn.Parameter(torch.empty(out_channels,

@@ -3,6 +3,7 @@ from typing import List
 import torch
 from torch import Tensor
 
+from tg_intrinsic.geometry.checks import check_channels
 from tg_intrinsic.nn.vector_linear import VectorLinear
 from tg_intrinsic.nn.vector_nonlin import VectorNonLin
 
@@ -25,9 +26,8 @@ class VectorMLP(torch.nn.Module):
     """
     def __init__(self, channels: List[int], batch_norm: bool = True):
         super().__init__()
-        if len(channels) < 2:
-            raise ValueError("'channels' needs at least an input and an "
-                             "output size")
+        # An input and an output size at least.
+        channels = check_channels(channels, 'channels', min_length=2)
         self.channels = list(channels)
         layers = []
         for c_in, c_out in zip(channels[:-1], channels[1:]):

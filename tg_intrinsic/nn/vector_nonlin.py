@@ -1,6 +1,7 @@
 import torch
 from torch import Tensor
 
+from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.geometry.pointcloud.operators import (interleaved, planar,
                                                         vector_norm)
 
@@ -31,7 +32,7 @@ class VectorNonLin(torch.nn.Module):
     def __init__(self, channels: int, batch_norm: bool = True,
                  eps: float = 1e-8):
         super().__init__()
-        self.channels = channels
+        self.channels = check_positive_int(channels, 'channels')
         self.eps = eps
         if batch_norm:
             self.norm = torch.nn.BatchNorm1d(channels)

@@ -1,7 +1,8 @@
 import torch
 from torch import Tensor
 
-from tg_intrinsic.geometry.checks import check_prolongation
+from tg_intrinsic.geometry.checks import (check_positive_int,
+                                          check_prolongation)
 
 
 class GravoPool(torch.nn.Module):
@@ -24,8 +25,9 @@ class GravoPool(torch.nn.Module):
     """
     def forward(self, x: Tensor, prolong_index: Tensor,
                 prolong_weight: Tensor, num_coarse: int) -> Tensor:
+        num_coarse = check_positive_int(num_coarse, 'num_coarse', minimum=0)
         check_prolongation(x, prolong_index, prolong_weight, x.size(0),
-                            'fine')
+                           'fine', num_coarse)
         fine, coarse = prolong_index
         weight = prolong_weight.to(x.dtype)
         shape = (-1, ) + (1, ) * (x.dim() - 1)

@@ -1,7 +1,8 @@
 import torch
 from torch import Tensor
 
-from tg_intrinsic.geometry.checks import check_prolongation
+from tg_intrinsic.geometry.checks import (check_positive_int,
+                                          check_prolongation)
 
 
 class GravoUnpool(torch.nn.Module):
@@ -18,8 +19,9 @@ class GravoUnpool(torch.nn.Module):
     """
     def forward(self, x: Tensor, prolong_index: Tensor,
                 prolong_weight: Tensor, num_fine: int) -> Tensor:
+        num_fine = check_positive_int(num_fine, 'num_fine', minimum=0)
         check_prolongation(x, prolong_index, prolong_weight, x.size(0),
-                            'coarse')
+                           'coarse', num_fine)
         fine, coarse = prolong_index
         shape = (-1, ) + (1, ) * (x.dim() - 1)
         return x.new_zeros((num_fine, ) + x.shape[1:]).index_add_(

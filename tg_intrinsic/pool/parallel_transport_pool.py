@@ -3,6 +3,9 @@ from typing import Optional
 import torch
 from torch import Tensor
 
+from tg_intrinsic.geometry.checks import (check_float_tensor, check_index,
+                                          check_positive_int, check_streams,
+                                          same_device)
 from tg_intrinsic.geometry.geodesics.harmonic import transport_features
 
 
@@ -36,11 +39,16 @@ class ParallelTransportPool(torch.nn.Module):
 
     def forward(self, x: Tensor, cluster: Tensor, transport: Tensor,
                 num_clusters: Optional[int] = None) -> Tensor:
-        if cluster.shape != (x.size(0),) or transport.shape != (x.size(0),):
-            raise ValueError(f"'cluster' and 'transport' need one entry per "
-                             f"fine point ({x.size(0)}), got "
-                             f"{list(cluster.shape)} and "
-                             f"{list(transport.shape)}")
+        # Checked first: index_add_ and bincount fail late or silently.
+        x = check_streams(x, 'x')
+        n = x.size(0)
+        if num_clusters is not None:
+            num_clusters = check_positive_int(num_clusters, 'num_clusters',
+                                              minimum=0)
+        cluster = check_index(cluster, 'cluster', num_clusters, x, size=n,
+                              what=f'clusters (num_clusters={num_clusters})')
+        check_float_tensor(transport, 'transport', (n, ))
+        same_device(transport, 'transport', x, 'x')
         if num_clusters is None:
             num_clusters = int(cluster.max()) + 1 if cluster.numel() else 0
         moved = transport_features(x, transport)

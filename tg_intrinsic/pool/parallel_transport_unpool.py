@@ -1,6 +1,8 @@
 import torch
 from torch import Tensor
 
+from tg_intrinsic.geometry.checks import (check_float_tensor, check_index,
+                                          check_streams, same_device)
 from tg_intrinsic.geometry.geodesics.harmonic import transport_features
 
 
@@ -20,12 +22,11 @@ class ParallelTransportUnpool(torch.nn.Module):
     """
     def forward(self, x: Tensor, cluster: Tensor, transport: Tensor
                 ) -> Tensor:
-        if cluster.shape != transport.shape or cluster.dim() != 1:
-            raise ValueError("'cluster' and 'transport' must be [N] with one "
-                             "entry per fine point")
-        if cluster.numel() and int(cluster.max()) >= x.size(0):
-            raise ValueError(f"'cluster' refers to coarse point "
-                             f"{int(cluster.max())} but x has {x.size(0)}")
+        x = check_streams(x, 'x')
+        cluster = check_index(cluster, 'cluster', x.size(0), x,
+                              what="rows in 'x' (coarse points)")
+        check_float_tensor(transport, 'transport', cluster.shape)
+        same_device(transport, 'transport', x, 'x')
         return transport_features(x[cluster], -transport)
 
     def __repr__(self) -> str:

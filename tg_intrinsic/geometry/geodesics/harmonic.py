@@ -32,7 +32,9 @@ from typing import Optional
 import torch
 from torch import Tensor
 
-from ..checks import check_positive_float, check_positive_int, check_tensor
+from ..checks import (check_edge_index, check_float_tensor,
+                      check_positive_float, check_positive_int, check_rows,
+                      check_tensor)
 # A^H is what complex autograd needs in the backward pass.
 from ..sparse import SparseMM
 
@@ -167,6 +169,7 @@ class HarmonicOperator:
         if transport.shape != (e,) or edge_index.shape != (2, e):
             raise ValueError(f"'edge_index' must be [2, E] and 'transport' "
                              f"[E] with E = {e} (the rows of 'harmonic')")
+        check_float_tensor(transport, 'transport', (e,))
         self.num_nodes = n = num_nodes
         self.rings, self.in_orders, self.out_orders = q_count, in_orders, \
             out_orders
@@ -201,6 +204,7 @@ class HarmonicOperator:
 
     def aggregate(self, x: Tensor) -> Tensor:
         r"""``[N, P + 1, C]`` complex -> ``[N, Q, P + 1, O + 1, C]``."""
+        check_rows(x, 'x', self.num_nodes, 'the operator')
         c = x.size(-1)
         flat = x.reshape(self.num_nodes * self.in_orders, c)
         out = SparseMM.apply(self.matrix, self.adjoint, flat)
@@ -214,7 +218,9 @@ def harmonic_layout(edge_index: Tensor, harmonic: Tensor, num_nodes: int
     depend on the orders: the (edge, ring) pairs with weight (at most two
     per edge), their row group (centre, ring) and source, and the rank of
     every pair within both."""
-    j, i = edge_index
+    # Out-of-range nodes would give CSR columns past the end of x.
+    j, i = check_edge_index(edge_index, num_nodes, harmonic,
+                            ref_name='harmonic')
     edge, ring = (harmonic[:, :, 0] != 0).nonzero(as_tuple=True)
     src, bucket = j[edge], i[edge] * harmonic.size(1) + ring
     rank, count = _ranks(bucket, num_nodes * harmonic.size(1))

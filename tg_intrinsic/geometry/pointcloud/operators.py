@@ -29,6 +29,8 @@ import torch
 from numba import njit, prange
 from torch import Tensor
 
+from ..checks import (check_edge_index, check_float_tensor,
+                      check_positive_int, check_rows, same_device)
 from ..sparse import SparseMM
 
 # CSR matrix products are stable for what is used here (mm with a dense
@@ -152,7 +154,16 @@ class SurfaceOperators:
     """
     def __init__(self, edge_index: Tensor, grad_weight: Tensor,
                  div_weight: Tensor, num_nodes: int):
-        n = num_nodes
+        # The CSR matrices are assembled unchecked and the numba sweeps do
+        # not bound-check: bad indices must fail here, not as garbage.
+        n = check_positive_int(num_nodes, 'num_nodes', minimum=0)
+        edge_index = check_edge_index(edge_index, n, edge_index,
+                                      f'points (num_nodes={n})')
+        e = edge_index.size(1)
+        for name, weight in (('grad_weight', grad_weight),
+                             ('div_weight', div_weight)):
+            check_float_tensor(weight, name, (e, 2))
+            same_device(weight, name, edge_index, 'edge_index')
         self.source_edge_index = edge_index  # as given, for identity checks
         j, i = edge_index
         if i.numel() > 1 and bool((i[1:] < i[:-1]).any()):
@@ -176,11 +187,13 @@ class SurfaceOperators:
 
     def grad(self, x: Tensor) -> Tensor:
         """:math:`G x`: ``[N, C]`` -> ``[N, C, 2]``."""
+        check_rows(x, 'x', self.num_nodes, 'the operators')
         out = SparseMM.apply(self.G, self.G_t, x)  # [2N, C]
         return interleaved(out.view(2, self.num_nodes, -1))
 
     def div(self, v: Tensor) -> Tensor:
         """:math:`D v`: ``[N, C, 2]`` -> ``[N, C]``."""
+        check_rows(v, 'v', self.num_nodes, 'the operators')
         flat = planar(v).reshape(2 * self.num_nodes, -1)
         return SparseMM.apply(self.D, self.D_t, flat)
 
@@ -207,6 +220,7 @@ class SurfaceOperators:
         scatter of :math:`(N, C)` values instead of an :math:`(E, C)` mask.
         ``backend``: ``'numba'`` (CPU) or ``'torch'``; default: numba on CPU.
         """
+        check_rows(x, 'x', self.num_nodes, 'the operators')
         j, i = self.edge_index
         c = x.size(1)
         if j.numel() == 0:
@@ -245,6 +259,7 @@ class SurfaceOperators:
 
     def neighbor_sum(self, x: Tensor) -> Tensor:
         r""":math:`\sum_{j \in \mathcal{N}(i)} x_j` over the graph."""
+        check_rows(x, 'x', self.num_nodes, 'the operators')
         if not hasattr(self, 'A'):
             j = self.edge_index[0]
             ones = torch.ones(j.numel(), dtype=x.dtype, device=x.device)

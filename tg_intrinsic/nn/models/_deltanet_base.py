@@ -4,6 +4,7 @@ import torch
 from torch import Tensor
 from torch_geometric.data import Data
 
+from tg_intrinsic.geometry.checks import check_channels, check_positive_int
 from tg_intrinsic.geometry.pointcloud.mls import build_mls_operators
 from tg_intrinsic.geometry.pointcloud.operators import SurfaceOperators
 from tg_intrinsic.nn.delta_conv import DeltaConv
@@ -38,6 +39,10 @@ class DeltaNetBase(torch.nn.Module):
                  kernel_width: float = 1.0, centralize_first: bool = True,
                  vector_stream: bool = True):
         super().__init__()
+        check_positive_int(in_channels, 'in_channels')
+        conv_channels = check_channels(conv_channels, 'conv_channels')
+        check_positive_int(depth, 'depth')
+        check_positive_int(k, 'k')
         self.in_channels = in_channels
         self.k = k
         self.regularizer = regularizer

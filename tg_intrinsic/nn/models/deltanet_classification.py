@@ -5,6 +5,7 @@ from torch import Tensor
 from torch_geometric.data import Data
 from torch_geometric.nn import global_mean_pool
 
+from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.nn.delta_conv import scalar_mlp
 from tg_intrinsic.pool.global_max_pool import (dense_max_pool,
                                                global_max_pool)
@@ -59,6 +60,10 @@ class DeltaNetClassification(torch.nn.Module):
                  kernel_width: float = 1.0, embedding_size: int = 1024,
                  dropout: float = 0.5, vector_stream: bool = True):
         super().__init__()
+        # torch builds zero-width layers without a word; DeltaNetBase
+        # checks in_channels, conv_channels, depth and k.
+        check_positive_int(num_classes, 'num_classes')
+        check_positive_int(embedding_size, 'embedding_size')
         self.in_channels = in_channels
         self.num_classes = num_classes
         self.conv_channels = tuple(conv_channels)

@@ -4,6 +4,7 @@ import torch
 from torch import Tensor
 from torch_geometric.data import Data
 
+from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.nn.delta_conv import scalar_mlp
 from tg_intrinsic.pool.global_max_pool import global_max_pool
 from tg_intrinsic.nn.models._deltanet_base import DeltaNetBase
@@ -54,6 +55,12 @@ class DeltaNetSegmentation(torch.nn.Module):
                  num_categories: Optional[int] = None, dropout: float = 0.5,
                  vector_stream: bool = True):
         super().__init__()
+        # torch builds zero-width layers without a word; DeltaNetBase
+        # checks in_channels, conv_channels, depth and k.
+        check_positive_int(num_classes, 'num_classes')
+        check_positive_int(embedding_size, 'embedding_size')
+        if num_categories is not None:
+            check_positive_int(num_categories, 'num_categories')
         self.in_channels = in_channels
         self.num_classes = num_classes
         self.conv_channels = tuple(conv_channels)

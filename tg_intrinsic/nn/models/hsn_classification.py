@@ -6,6 +6,7 @@ from torch import Tensor
 from torch_geometric.data import Data
 from torch_geometric.nn import global_mean_pool
 
+from tg_intrinsic.geometry.checks import check_channels, check_positive_int
 from tg_intrinsic.nn.harmonic_conv import HarmonicConv
 from tg_intrinsic.nn.harmonic_resnet_block import HarmonicResNetBlock
 from tg_intrinsic.nn.models._hsn_base import (input_features, invariant,
@@ -55,7 +56,9 @@ class HSNClassification(torch.nn.Module):
                  channels: Sequence[int] = (16, 32), max_order: int = 1,
                  rings: int = 6):
         super().__init__()
-        c0, c1 = channels
+        check_positive_int(in_channels, 'in_channels')
+        check_positive_int(num_classes, 'num_classes')
+        c0, c1 = check_channels(channels, 'channels', length=2)
         self.in_channels = in_channels
         self.num_classes = num_classes
         self.channels = (c0, c1)

@@ -1,10 +1,37 @@
-from typing import Dict, Iterable, Tuple
+from typing import Dict, Iterable, Sequence, Tuple
 
 import torch
 from torch import Tensor
 from torch_geometric.data import Data
 
+from tg_intrinsic.geometry.checks import check_channels, check_positive_int
 from tg_intrinsic.nn.harmonic_resnet_block import harmonic_operators
+
+
+class HSNBase(torch.nn.Module):
+    """What every HSN model shares: its validated sizes, the lifting
+    linear layer to the first width, the output bias and the repr; a model
+    adds its blocks and :meth:`reset_parameters` of them."""
+    def __init__(self, in_channels: int, num_classes: int,
+                 channels: Sequence[int], max_order: int, rings: int):
+        super().__init__()
+        self.in_channels = check_positive_int(in_channels, 'in_channels')
+        self.num_classes = check_positive_int(num_classes, 'num_classes')
+        self.channels = tuple(check_channels(channels, 'channels',
+                                             length=2))
+        self.max_order = max_order
+        self.rings = rings
+        self.lin = torch.nn.Linear(in_channels, self.channels[0])
+        self.bias = torch.nn.Parameter(torch.zeros(num_classes))
+
+    def reset_parameters(self):
+        self.lin.reset_parameters()
+        torch.nn.init.zeros_(self.bias)
+
+    def __repr__(self) -> str:
+        return (f'{self.__class__.__name__}({self.in_channels}, '
+                f'{self.num_classes}, channels={self.channels}, '
+                f'max_order={self.max_order}, rings={self.rings})')
 
 
 def level_key(name: str, level: int) -> str:

@@ -6,16 +6,15 @@ from torch import Tensor
 from torch_geometric.data import Data
 from torch_geometric.nn import global_mean_pool
 
-from tg_intrinsic.geometry.checks import check_channels, check_positive_int
 from tg_intrinsic.nn.harmonic_conv import HarmonicConv
 from tg_intrinsic.nn.harmonic_resnet_block import HarmonicResNetBlock
-from tg_intrinsic.nn.models._hsn_base import (input_features, invariant,
-                                              level_operators, lift,
-                                              pooling)
+from tg_intrinsic.nn.models._hsn_base import (HSNBase, input_features,
+                                              invariant, level_operators,
+                                              lift, pooling)
 from tg_intrinsic.pool import ParallelTransportPool
 
 
-class HSNClassification(torch.nn.Module):
+class HSNClassification(HSNBase):
     r"""Harmonic Surface Network for shape classification, from the `"CNNs
     on Surfaces using Rotation-Equivariant Features"
     <https://doi.org/10.1145/3386569.3392437>`_ paper: the encoder half of
@@ -55,16 +54,8 @@ class HSNClassification(torch.nn.Module):
     def __init__(self, in_channels: int, num_classes: int,
                  channels: Sequence[int] = (16, 32), max_order: int = 1,
                  rings: int = 6):
-        super().__init__()
-        check_positive_int(in_channels, 'in_channels')
-        check_positive_int(num_classes, 'num_classes')
-        c0, c1 = check_channels(channels, 'channels', length=2)
-        self.in_channels = in_channels
-        self.num_classes = num_classes
-        self.channels = (c0, c1)
-        self.max_order = max_order
-        self.rings = rings
-        self.lin = torch.nn.Linear(in_channels, c0)
+        super().__init__(in_channels, num_classes, channels, max_order, rings)
+        c0, c1 = self.channels
         self.block0 = HarmonicResNetBlock(c0, c0, max_order, rings,
                                           prev_order=0)
         self.pool = ParallelTransportPool()
@@ -72,12 +63,11 @@ class HSNClassification(torch.nn.Module):
                                           prev_order=max_order)
         self.conv = HarmonicConv(c1, num_classes, max_order, rings,
                                  prev_order=max_order, offset=False)
-        self.bias = torch.nn.Parameter(torch.zeros(num_classes))
 
     def reset_parameters(self):
-        for module in (self.lin, self.block0, self.block1, self.conv):
+        super().reset_parameters()
+        for module in (self.block0, self.block1, self.conv):
             module.reset_parameters()
-        torch.nn.init.zeros_(self.bias)
 
     def forward(self, data: Data) -> Tensor:
         x = input_features(data, self.in_channels)
@@ -92,8 +82,3 @@ class HSNClassification(torch.nn.Module):
         batch = data.level_batch(1) if hasattr(data, 'level_batch') else \
             torch.zeros(n1, dtype=torch.long, device=z.device)
         return global_mean_pool(invariant(z), batch) + self.bias
-
-    def __repr__(self) -> str:
-        return (f'{self.__class__.__name__}({self.in_channels}, '
-                f'{self.num_classes}, channels={self.channels}, '
-                f'max_order={self.max_order}, rings={self.rings})')

@@ -5,16 +5,15 @@ import torch.nn.functional as F
 from torch import Tensor
 from torch_geometric.data import Data
 
-from tg_intrinsic.geometry.checks import check_channels, check_positive_int
 from tg_intrinsic.nn.harmonic_conv import HarmonicConv
 from tg_intrinsic.nn.harmonic_resnet_block import HarmonicResNetBlock
-from tg_intrinsic.nn.models._hsn_base import (input_features, invariant,
-                                              level_operators, lift,
-                                              pooling)
+from tg_intrinsic.nn.models._hsn_base import (HSNBase, input_features,
+                                              invariant, level_operators,
+                                              lift, pooling)
 from tg_intrinsic.pool import ParallelTransportPool, ParallelTransportUnpool
 
 
-class HSNSegmentation(torch.nn.Module):
+class HSNSegmentation(HSNBase):
     r"""Harmonic Surface Network for per-vertex segmentation, from the
     `"CNNs on Surfaces using Rotation-Equivariant Features"
     <https://doi.org/10.1145/3386569.3392437>`_ paper: a two-level U-ResNet
@@ -49,17 +48,9 @@ class HSNSegmentation(torch.nn.Module):
     def __init__(self, in_channels: int, num_classes: int,
                  channels: Sequence[int] = (16, 32), max_order: int = 1,
                  rings: int = 6):
-        super().__init__()
-        check_positive_int(in_channels, 'in_channels')
-        check_positive_int(num_classes, 'num_classes')
-        c0, c1 = check_channels(channels, 'channels', length=2)
-        self.in_channels = in_channels
-        self.num_classes = num_classes
-        self.channels = (c0, c1)
-        self.max_order = max_order
-        self.rings = rings
+        super().__init__(in_channels, num_classes, channels, max_order, rings)
+        c0, c1 = self.channels
         p = max_order
-        self.lin = torch.nn.Linear(in_channels, c0)
         self.enc0 = torch.nn.ModuleList([
             HarmonicResNetBlock(c0, c0, p, rings, prev_order=0),
             HarmonicResNetBlock(c0, c0, p, rings, prev_order=p)])
@@ -73,13 +64,11 @@ class HSNSegmentation(torch.nn.Module):
         self.unpool = ParallelTransportUnpool()
         self.conv = HarmonicConv(c0, num_classes, p, rings, prev_order=p,
                                  offset=False)
-        self.bias = torch.nn.Parameter(torch.zeros(num_classes))
 
     def reset_parameters(self):
-        for module in [self.lin, self.conv, *self.enc0, *self.enc1,
-                       *self.dec0]:
+        super().reset_parameters()
+        for module in [self.conv, *self.enc0, *self.enc1, *self.dec0]:
             module.reset_parameters()
-        torch.nn.init.zeros_(self.bias)
 
     def forward(self, data: Data) -> Tensor:
         x = input_features(data, self.in_channels)
@@ -98,8 +87,3 @@ class HSNSegmentation(torch.nn.Module):
             z = block(z, ops0)
         z = self.conv(z, operator=ops0[(o, o)])
         return invariant(z) + self.bias
-
-    def __repr__(self) -> str:
-        return (f'{self.__class__.__name__}({self.in_channels}, '
-                f'{self.num_classes}, channels={self.channels}, '
-                f'max_order={self.max_order}, rings={self.rings})')

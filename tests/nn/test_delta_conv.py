@@ -13,6 +13,7 @@ from tg_intrinsic.nn.models import (DeltaNetClassification,
                                     DeltaNetSegmentation)
 from tg_intrinsic.transforms import MLSOperators
 from tests.conftest import fibonacci_sphere
+from tests.symmetry import rotate_frames, rotate_vectors
 
 
 def blob(n=300, seed=0, dtype=torch.float64):
@@ -23,21 +24,6 @@ def blob(n=300, seed=0, dtype=torch.float64):
     pos = unit * radius[:, None] + 0.01 * torch.randn(n, 3, generator=g,
                                                       dtype=dtype)
     return pos, unit
-
-
-def rotate_frames(frame, theta):
-    c, s = torch.cos(theta)[:, None], torch.sin(theta)[:, None]
-    out = frame.clone()
-    out[:, 0] = c * frame[:, 0] + s * frame[:, 1]
-    out[:, 1] = -s * frame[:, 0] + c * frame[:, 1]
-    return out
-
-
-def rotate_vectors(v, theta):
-    """Coordinates of the same vectors in frames rotated by theta."""
-    c, s = torch.cos(theta)[:, None], torch.sin(theta)[:, None]
-    return torch.stack([c * v[..., 0] + s * v[..., 1],
-                        -s * v[..., 0] + c * v[..., 1]], -1)
 
 
 def operators(pos, frame, k=12):

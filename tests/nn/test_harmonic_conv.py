@@ -12,6 +12,7 @@ from tg_intrinsic.nn import (ComplexBatchNorm, ComplexLinear, ComplexReLU,
                              HarmonicConv, HarmonicResNetBlock)
 from tg_intrinsic.nn.harmonic_resnet_block import harmonic_operators
 from tg_intrinsic.pool import ParallelTransportPool, ParallelTransportUnpool
+from tests.symmetry import gauge_change, rotate_streams
 
 C128 = torch.complex128
 
@@ -33,21 +34,6 @@ def random_discs(n=60, radius=0.45, seed=0):
     return torch.stack([j, i]), logmap, transport, weight, radius
 
 
-def gauge_change(edge_index, logmap, transport, angle):
-    """Turn frame i by angle[i]: angles measured in it drop by angle[i]."""
-    j, i = edge_index
-    theta = torch.where(logmap[:, 0] > 0, logmap[:, 1] - angle[i], 0.0)
-    return (torch.stack([logmap[:, 0], theta], 1),
-            transport - angle[i] + angle[j])
-
-
-def rotate_streams(x, angle):
-    """Features of order M in frames turned by angle: times e^{-iM angle}."""
-    orders = torch.arange(x.size(1), dtype=torch.float64)
-    return x * torch.polar(torch.ones_like(angle)[:, None],
-                           -angle[:, None] * orders)[:, :, None]
-
-
 def rel(a, b):
     return float((a - b).abs().max().detach() / b.abs().max().detach())
 
@@ -55,6 +41,7 @@ def rel(a, b):
 @pytest.mark.parametrize('prev_order,max_order,separate,offset', [
     (0, 1, True, True), (1, 1, True, True), (1, 2, False, True),
     (2, 2, True, False), (2, 1, False, False)])
+
 def test_sparse_aggregation_equals_per_edge_messages(prev_order, max_order,
                                                      separate, offset):
     edge_index, logmap, transport, weight, radius = random_discs()

@@ -7,7 +7,8 @@ from torch_geometric.data import Batch
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry.geodesics.harmonic import harmonic_terms
 from tg_intrinsic.nn.models import HSNClassification, HSNSegmentation
-from tests.nn.test_harmonic_conv import gauge_change, rel
+from tests.nn.test_harmonic_conv import rel
+from tests.symmetry import gauge_change
 
 RINGS = 4
 

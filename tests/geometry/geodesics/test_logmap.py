@@ -17,6 +17,7 @@ from tg_intrinsic.geometry.geodesics import affine_heat as _affine_heat
 from tg_intrinsic.geometry.geodesics import vector_heat as _vector_heat
 
 from tests.conftest import grid_mesh, icosphere
+from tests.symmetry import rotate_frames
 from tests.geometry.test_bad_input import (SETTINGS, assert_valid, call,
                                            face_arrays, point_arrays)
 from tests.conftest import fibonacci_sphere
@@ -322,13 +323,6 @@ def test_vector_heat_at_the_boundary():
 # ----------------------------------------------------------------------------
 # symmetries
 # ----------------------------------------------------------------------------
-def rotate_frames(frame, angle):
-    c, s = torch.cos(angle)[:, None], torch.sin(angle)[:, None]
-    e_u = c * frame[:, 0] + s * frame[:, 1]
-    e_v = -s * frame[:, 0] + c * frame[:, 1]
-    return torch.stack([e_u, e_v, frame[:, 2]], 1)
-
-
 @pytest.mark.parametrize('method', METHODS)
 def test_gauge_equivariance(method):
     pos, face = bumpy_sphere(2)

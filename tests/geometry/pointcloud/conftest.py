@@ -20,12 +20,6 @@ def tangential(frame, ambient):
                         (frame[:, 1] * ambient).sum(-1)], -1)
 
 
-def random_rotation(dtype, seed=0):
-    g = torch.Generator().manual_seed(seed)
-    q, _ = torch.linalg.qr(torch.randn(3, 3, generator=g, dtype=dtype))
-    return q * torch.sign(torch.linalg.det(q))
-
-
 @pytest.fixture(scope='module')
 def sphere_ops():
     pos = fibonacci_sphere(3000)

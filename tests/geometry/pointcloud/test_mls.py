@@ -7,7 +7,8 @@ from tg_intrinsic.geometry import knn, tangent_frames
 from tg_intrinsic.geometry.pointcloud import operators as ops
 from tg_intrinsic.geometry.pointcloud.mls import mls_grad_div
 from tests.conftest import fibonacci_sphere
-from tests.geometry.pointcloud.conftest import build, random_rotation, tangential
+from tests.geometry.pointcloud.conftest import build, tangential
+from tests.symmetry import random_rotation
 
 
 def plane(n=900, seed=0, dtype=torch.float64):

@@ -6,8 +6,7 @@ import torch
 from scipy import integrate, special
 
 from tg_intrinsic.geometry.geodesics.harmonic import (HarmonicOperator,
-                                                      harmonic_terms,
-                                                      ring_weights)
+                                                      harmonic_terms)
 from tg_intrinsic.nn import (ComplexBatchNorm, ComplexLinear, ComplexReLU,
                              HarmonicConv, HarmonicResNetBlock)
 from tg_intrinsic.nn.harmonic_resnet_block import harmonic_operators
@@ -143,18 +142,6 @@ def test_centre_carries_no_angular_term():
     out = conv(torch.randn(n, 2, dtype=torch.float64), edge_index, harmonic,
                torch.zeros(n, dtype=torch.float64))
     assert out[:, 1:].abs().max() == 0 and out[:, 0].abs().max() > 0
-
-
-def test_ring_weights_interpolate_and_vanish_at_the_radius():
-    r = torch.tensor([0.0, 0.1, 0.25, 0.49, 0.5, 0.7], dtype=torch.float64)
-    mu = ring_weights(r, 0.5, 4)  # rings at 0, .125, .25, .375
-    assert torch.allclose(mu[0], torch.tensor([1., 0, 0, 0],
-                                              dtype=torch.float64))
-    assert torch.allclose(mu[1], torch.tensor([.2, .8, 0, 0],
-                                              dtype=torch.float64))
-    assert torch.allclose(mu[2], torch.tensor([0., 0, 1, 0],
-                                              dtype=torch.float64))
-    assert mu[3].sum() < 0.1 and (mu[4:] == 0).all()
 
 
 @pytest.mark.parametrize('m', [0, 1, 2])

@@ -196,7 +196,8 @@ def test_bad_arguments():
         gravo_level(pos, face_edges(face), weighting='linear')
     with pytest.raises(ValueError, match='voronoi'):
         gravo_hierarchy(pos, face_edges(face), voronoi='approximate')
-    with pytest.raises(ValueError, match='must index the'):
+    with pytest.raises(ValueError, match=r"'edge_index' holds indices in "
+                                          r"\[1, 162\], outside \[0, 162\)"):
         gravo_level(pos, face_edges(face) + 1)
     with pytest.raises(ValueError, match='NaN'):
         gravo_level(np.full_like(pos, np.nan), face_edges(face))

@@ -36,8 +36,10 @@ def test_unreachable_points_and_bad_input():
     assert cell.tolist() == [0, 0, 0, 1, 1, 1]
     with pytest.raises(ValueError, match="'seeds' is empty"):
         graph_voronoi(pos, edge_index, torch.tensor([], dtype=torch.long))
-    with pytest.raises(ValueError, match="must index the 6 points"):
+    with pytest.raises(ValueError, match="'seeds' holds .*9"):
         graph_voronoi(pos, edge_index, torch.tensor([9]))
+    with pytest.raises(ValueError, match="'edge_index' holds indices"):
+        graph_voronoi(pos, edge_index + 3, torch.tensor([0]))
 
 
 def _scipy_distances(src, dst, length, n, seeds):

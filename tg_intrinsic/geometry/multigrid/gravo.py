@@ -7,9 +7,10 @@ import math
 from typing import List, NamedTuple
 
 import numpy as np
+import torch
 from numba import njit, prange
 
-from ..checks import check_choice
+from ..checks import check_choice, check_edge_index, check_points
 from .voronoi import dijkstra_from
 
 WEIGHTINGS = ('barycentric', 'inverse_distance', 'uniform')
@@ -368,20 +369,15 @@ def check_options(ratio, weighting: str, voronoi: str):
 
 
 def _check_graph(pos, edge_index):
-    pos = np.ascontiguousarray(pos, dtype=np.float64)
-    edge_index = np.asarray(edge_index)
-    if pos.ndim != 2 or pos.shape[1] != 3:
-        raise ValueError(f"'pos' must have shape (N, 3), got {pos.shape}")
-    if not np.isfinite(pos).all():
-        raise ValueError("'pos' holds NaN or infinite coordinates")
-    if edge_index.ndim != 2 or edge_index.shape[0] != 2:
-        raise ValueError(f"'edge_index' must have shape (2, E), got "
-                         f"{edge_index.shape}")
-    if edge_index.size and (edge_index.min() < 0
-                            or edge_index.max() >= pos.shape[0]):
-        raise ValueError(f"'edge_index' must index the {pos.shape[0]} "
-                         f"points")
-    return pos, edge_index
+    """Points ``(N, 3)`` and a graph ``(2, E)`` (tensors or arrays) checked
+    by the shared checks; returned as float64 / int64 numpy."""
+    pos = check_points(torch.as_tensor(pos), 'pos')
+    edge_index = torch.as_tensor(edge_index)
+    if not edge_index.is_floating_point():
+        edge_index = edge_index.long()
+    edge_index = check_edge_index(edge_index, pos.size(0), pos)
+    return (np.ascontiguousarray(pos.detach().double().cpu().numpy()),
+            np.ascontiguousarray(edge_index.cpu().numpy()))
 
 
 def _coarsen(pos, indptr, indices, ratio, shift, weighting, voronoi):

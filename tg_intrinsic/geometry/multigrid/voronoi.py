@@ -7,7 +7,8 @@ import torch
 from numba import njit
 from torch import Tensor
 
-from ..checks import check_points, check_tensor
+from ..checks import (check_edge_index, check_index, check_points,
+                      check_tensor)
 from ..heap import sift_down, sift_up
 
 
@@ -39,19 +40,12 @@ def graph_voronoi(pos: Tensor, edge_index: Tensor, seeds: Tensor,
             graph without a seed): add a seed there or drop the component.
     """
     pos = check_points(pos)
-    edge_index = check_tensor(edge_index, 'edge_index')
-    seeds = check_tensor(seeds, 'seeds')
     n = pos.size(0)
-    if edge_index.dim() != 2 or edge_index.size(0) != 2:
-        raise ValueError(f"'edge_index' must have shape [2, E], got "
-                         f"{list(edge_index.shape)}")
+    edge_index = check_edge_index(edge_index, n, pos)
+    seeds = check_tensor(seeds, 'seeds')
     if seeds.numel() == 0:
         raise ValueError("'seeds' is empty; pass at least one seed index")
-    if int(seeds.min()) < 0 or int(seeds.max()) >= n:
-        raise ValueError(f"'seeds' must index the {n} points")
-    if edge_index.numel() and (int(edge_index.min()) < 0
-                               or int(edge_index.max()) >= n):
-        raise ValueError(f"'edge_index' must index the {n} points")
+    seeds = check_index(seeds, 'seeds', n, pos, ref_name='pos')
     src, dst = edge_index.cpu().numpy()
     if edge_length is None:
         p = pos.detach().cpu().double().numpy()

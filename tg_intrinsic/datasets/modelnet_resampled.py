@@ -5,9 +5,10 @@ from typing import List
 import torch
 
 from tg_intrinsic.data import IntrinsicData
+from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.io.points import read_points
 
-from .common import FolderDataset, check_int, check_option
+from .common import FolderDataset, check_option
 
 LAYOUT = ("modelnet40_normal_resampled/ with modelnet40_shape_names.txt, "
           "modelnet40_train.txt, modelnet40_test.txt (and the modelnet10_* "
@@ -84,7 +85,7 @@ class ModelNetResampled(FolderDataset):
                  force_reload: bool = False):
         self.num_classes_arg = check_option(num_classes, 'num_classes',
                                             (40, 10))
-        self.num_points = check_int(num_points, 'num_points', 1)
+        self.num_points = check_positive_int(num_points, 'num_points', 1)
         super().__init__(root, split, transform, pre_transform, pre_filter,
                          log, force_reload)
         self.classes: List[str] = self.meta['classes']

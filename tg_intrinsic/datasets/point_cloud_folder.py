@@ -5,11 +5,11 @@ from typing import List, Optional
 import torch
 
 from tg_intrinsic.data import IntrinsicData
+from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.io.labels import check_labels, read_labels, to_int_labels
 from tg_intrinsic.io.points import POINT_EXTENSIONS, read_points
 
-from .common import (FolderDataset, check_int, check_task, find_label_file,
-                      list_files)
+from .common import FolderDataset, check_task, find_label_file, list_files
 
 # label files beside a point file, and in the label folders
 BESIDE_LABELS = ('.seg', '.labels', '.label')
@@ -118,9 +118,9 @@ class PointCloudFolder(FolderDataset):
     ):
         self.task = check_task(task, label_offset=(label_offset, 0),
                                num_classes=(num_classes, None))
-        self.label_offset = check_int(label_offset, 'label_offset', 0)
+        self.label_offset = check_positive_int(label_offset, 'label_offset', 0)
         self.num_classes_arg = None if num_classes is None else \
-            check_int(num_classes, 'num_classes', 1)
+            check_positive_int(num_classes, 'num_classes', 1)
         super().__init__(root, split, transform, pre_transform, pre_filter,
                          log, force_reload)
         self.classes: Optional[List[str]] = self.meta['classes']

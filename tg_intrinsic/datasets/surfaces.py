@@ -5,9 +5,9 @@ import numpy as np
 import torch
 from torch_geometric.data import Data
 
-from .common import check_int, shape_rng
+from tg_intrinsic.geometry.checks import check_positive_int
 
-
+from .common import shape_rng
 def bumpy_torus(num_vertices: int = 204800, seed: int = 0) -> Data:
     r"""A closed torus (major radius 1, tube radius about 0.35) with random
     smooth bumps on the tube, triangulated on a regular :math:`n_u \times
@@ -34,8 +34,8 @@ def bumpy_torus(num_vertices: int = 204800, seed: int = 0) -> Data:
         float64, ``face`` :math:`(3, 2N)` and ``uv`` :math:`(N, 2)` (the
         grid angles).
     """
-    num_vertices = check_int(num_vertices, 'num_vertices', 32)
-    seed = check_int(seed, 'seed', 0)
+    num_vertices = check_positive_int(num_vertices, 'num_vertices', 32)
+    seed = check_positive_int(seed, 'seed', 0)
     n_v = max(4, math.ceil(math.sqrt(num_vertices / 2)))
     n_u = 2 * n_v
     rng = shape_rng(seed, 0)

@@ -18,13 +18,12 @@ from tg_intrinsic.geometry.appearance.lighting import render_radiance
 from tg_intrinsic.geometry.appearance.raster import point_visibility
 from tg_intrinsic.geometry.appearance.sh import fibonacci_sphere
 from tg_intrinsic.geometry.checks import (check_faces, check_image_size,
-                                          check_points)
+                                          check_points, check_positive_int)
 from tg_intrinsic.geometry.mesh import vertex_normals
 from tg_intrinsic.io.hdr import read_envmap
 
 from .capture import render_images as _render_images
 
-from .common import check_int
 
 SHAPES = ('sphere', )
 MATERIALS = ('metals', 'dielectrics', 'mixed')
@@ -39,7 +38,7 @@ def _icosphere(subdivisions):
 
 def _load_shape(shape, resolution, seed):
     if isinstance(shape, str) and shape == 'sphere':
-        subdivisions = 4 if resolution is None else check_int(
+        subdivisions = 4 if resolution is None else check_positive_int(
             resolution, 'resolution', 0)
         return _icosphere(subdivisions)
     if isinstance(shape, (str, os.PathLike)):
@@ -71,7 +70,7 @@ def _load_shape(shape, resolution, seed):
     if resolution is not None and resolution < pos.size(0):
         from tg_intrinsic.geometry.mesh import is_closed_manifold
         from .quadric_decimation import decimate
-        resolution = check_int(resolution, 'resolution', 4)
+        resolution = check_positive_int(resolution, 'resolution', 4)
         if not is_closed_manifold(face, pos.size(0)):
             raise ValueError("'resolution' (a target vertex count) needs a "
                              "closed manifold mesh to decimate; pass "
@@ -262,7 +261,7 @@ def svbrdf_scene(shape: Union[str, Tuple[Tensor, Tensor]] = 'sphere',
             or (isinstance(shape, str))):
         raise ValueError(f"'shape' must be 'sphere', (vertices, faces) or "
                          f"a path, got {type(shape)}")
-    num_views = check_int(num_views, 'num_views', 1)
+    num_views = check_positive_int(num_views, 'num_views', 1)
     height, width = check_image_size(image_size)
     if materials not in MATERIALS:
         raise ValueError(f"'materials' must be one of {MATERIALS}, got "
@@ -271,8 +270,8 @@ def svbrdf_scene(shape: Union[str, Tuple[Tensor, Tensor]] = 'sphere',
     if not (0 <= lo <= hi <= 1):
         raise ValueError(f"'roughness_range' must be (low, high) with 0 <= "
                          f"low <= high <= 1, got {roughness_range!r}")
-    seed = check_int(seed, 'seed', 0)
-    num_patches = check_int(num_patches, 'num_patches', 1)
+    seed = check_positive_int(seed, 'seed', 0)
+    num_patches = check_positive_int(num_patches, 'num_patches', 1)
     if not (camera_distance > 1):
         raise ValueError(f"'camera_distance' must exceed 1 (the bounding "
                          f"radius), got {camera_distance!r}")

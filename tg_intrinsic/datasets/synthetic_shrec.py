@@ -6,10 +6,10 @@ import torch
 from tqdm.auto import tqdm
 
 from tg_intrinsic.data import IntrinsicData
+from tg_intrinsic.geometry.checks import check_positive_int
 
 from . import shrec_shapes as shapes
-from .common import (GeneratedDataset, check_int, check_split, fmt,
-                      save_atomic, shape_rng)
+from .common import GeneratedDataset, check_split, fmt, save_atomic, shape_rng
 
 
 class SyntheticSHREC(GeneratedDataset):
@@ -131,8 +131,8 @@ class SyntheticSHREC(GeneratedDataset):
             raise ValueError(f"'task' must be 'classification' or "
                              f"'segmentation', got {task!r}")
         self.task = task
-        self.num_per_class = check_int(num_per_class, 'num_per_class', 2)
-        self.num_train_per_class = check_int(num_train_per_class,
+        self.num_per_class = check_positive_int(num_per_class, 'num_per_class', 2)
+        self.num_train_per_class = check_positive_int(num_train_per_class,
                                              'num_train_per_class', 1)
         if self.num_train_per_class >= self.num_per_class:
             raise ValueError(f"'num_train_per_class' ({num_train_per_class}) "
@@ -153,7 +153,7 @@ class SyntheticSHREC(GeneratedDataset):
                              f"shortest edge of every vertex), got {noise}")
         self.noise = noise
         self.rotate = bool(rotate)
-        self.seed = check_int(seed, 'seed', 0)
+        self.seed = check_positive_int(seed, 'seed', 0)
         super().__init__(root, transform, pre_transform, pre_filter, log=log,
                          force_reload=force_reload)
         self.load(self.processed_paths[self._file_index(split, task)],

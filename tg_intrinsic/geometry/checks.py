@@ -92,6 +92,10 @@ def batch_sizes(batch: Optional[Tensor], num_points: int) -> Tensor:
 
 
 def check_positive_int(value, name: str, minimum: int = 1) -> int:
+    """An integer (Python, numpy or a one-element integer tensor) of at
+    least ``minimum``, as a Python int."""
+    if isinstance(value, np.integer):
+        value = int(value)
     if isinstance(value, bool) or not isinstance(value, int):
         if isinstance(value, Tensor) and value.numel() == 1 \
                 and not value.is_floating_point():

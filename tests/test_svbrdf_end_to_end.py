@@ -50,7 +50,16 @@ def test_mixed_recovery_on_the_independent_renderer(scene, l_max, model):
     assert float(r.mean()) < 0.7 * float(spectrum_r.mean())
     assert float(r.mean()) < 0.12
     assert b < 0.22
-    # entropy ranks the points by how wrong the recovery is
+    # Entropy ranks the points by how wrong the estimates are. Measured on
+    # this scene (642 seen points): Spearman's rho of entropy and the
+    # spectrum-only roughness error 0.44 (eq5.11) and 0.45 (split_sum), of
+    # entropy and the recovered roughness error 0.19 and 0.21. Entropy
+    # unrelated to the error (shuffled over the points) gives rho around 0
+    # with a standard deviation of 0.04 (above 0.11-0.12 once in 1000
+    # shuffles); a constant one gives NaN; both fail, as does a reversed one.
     seen = data.obs_mask.any(1)
-    rho = spearmanr(data.entropy[seen].numpy(), r.numpy()).correlation
-    assert rho > 0.0
+    entropy = data.entropy[seen].numpy()
+    rho_spectrum = spearmanr(entropy, spectrum_r.numpy()).correlation
+    assert rho_spectrum > 0.3
+    rho = spearmanr(entropy, r.numpy()).correlation
+    assert rho > 0.12

@@ -20,16 +20,27 @@ scores the same) with their operators, HSN's discs, log maps and
 transport. Rotations, uniform scales and translations keep both valid;
 a per-axis scale makes DeltaNet rebuild its operators for every batch.
 
-Writes to ``--out``: ``checkpoint.pt`` (model, optimiser, schedule, history;
-written atomically at every evaluation, so ``--resume`` continues an
-interrupted run), ``metrics.json``, ``metrics.csv`` (one row per epoch) and
-``learning_curve.png``.
+Writes to ``--out``: ``checkpoint.pt`` (model, optimiser, schedule, history
+and the random number generators' states; written atomically at every
+evaluation, so ``--resume`` continues an interrupted run), ``metrics.json``,
+``metrics.csv`` (one row per epoch) and ``learning_curve.png``.
+
+Runs are reproducible: ``--seed`` seeds torch, NumPy and Python's
+``random`` (the augmentations draw from them) and the shuffling, so two
+runs with the same arguments on the same machine and thread count give the
+same weights bit for bit on the CPU. ``--resume`` restores the generators'
+states of the checkpoint, so an interrupted and resumed run shuffles and
+augments its remaining epochs as an uninterrupted one would, and ends with
+the same weights. A run starting or resuming in ``--out`` removes the
+temporary files (``.tmp-*``) that a run killed while writing left there.
 """
 import argparse
 import hashlib
 import json
 import os
+import random
 import time
+import warnings
 from typing import Dict, List, Optional
 
 import numpy as np
@@ -43,7 +54,7 @@ from tqdm import tqdm
 from tg_intrinsic.io.figures import save_figure
 from tg_intrinsic.protocols import DEFAULT_PROTOCOL, PROTOCOLS, get_protocol
 from tg_intrinsic.utils import (atomic_torch_save, atomic_write,
-                                atomic_write_json)
+                                atomic_write_json, remove_temporaries)
 
 DATASETS = ('synthetic_modelnet', 'synthetic_shrec', 'mesh_folder')
 MODELS = ('deltanet', 'hsn')
@@ -405,8 +416,40 @@ def plot_history(history: List[Dict], path: str, title: str):
     save_figure(fig, path)
 
 
+def seed_everything(seed: int) -> None:
+    """Seeds the generators training draws from: torch's (model
+    initialisation, dropout, this package's random transforms), NumPy's and
+    Python's ``random`` (PyG's ``RandomScale`` and other transforms)."""
+    torch.manual_seed(seed)
+    np.random.seed(seed % 2 ** 32)
+    random.seed(seed)
+
+
+def rng_state(loader_generator: torch.Generator) -> Dict:
+    """The states of every generator training draws from (see
+    :func:`seed_everything`) and of the shuffling generator, for a
+    checkpoint."""
+    state = {'torch': torch.get_rng_state(), 'numpy': np.random.get_state(),
+             'python': random.getstate(),
+             'loader': loader_generator.get_state()}
+    if torch.cuda.is_available():
+        state['cuda'] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def set_rng_state(state: Dict, loader_generator: torch.Generator) -> None:
+    """Restores what :func:`rng_state` saved."""
+    torch.set_rng_state(state['torch'].cpu())
+    np.random.set_state(state['numpy'])
+    random.setstate(state['python'])
+    loader_generator.set_state(state['loader'].cpu())
+    if 'cuda' in state and torch.cuda.is_available() and \
+            len(state['cuda']) == torch.cuda.device_count():
+        torch.cuda.set_rng_state_all([s.cpu() for s in state['cuda']])
+
+
 def train(args) -> Dict:
-    torch.manual_seed(args.seed)
+    seed_everything(args.seed)
     if args.threads:
         torch.set_num_threads(args.threads)
     device = torch.device(args.device if args.device != 'auto' else
@@ -422,6 +465,9 @@ def train(args) -> Dict:
     augment = augmentation(args)
     train_set = train_items if augment is None else \
         _Mapped(train_items, augment)
+    # Seeded again: whether the inputs were prepared now or read from the
+    # cache must not change what follows.
+    seed_everything(args.seed)
     model = build_model(args.model, num_classes, args, None if part_mask
                         is None else part_mask.size(0)).to(device)
     if args.optimizer == 'sgd':
@@ -438,9 +484,15 @@ def train(args) -> Dict:
         schedule = torch.optim.lr_scheduler.MultiStepLR(
             optimizer, milestones=args.milestones, gamma=args.gamma)
     os.makedirs(args.out, exist_ok=True)
+    # Left by a run killed while writing a checkpoint or metrics.
+    leftovers = remove_temporaries(args.out)
+    if leftovers:
+        print(f"removed {len(leftovers)} temporary file(s) of an interrupted "
+              f"write from {args.out}: {', '.join(leftovers)}")
     checkpoint_path = os.path.join(args.out, 'checkpoint.pt')
     history: List[Dict] = []
     start_epoch = 1
+    generator = torch.Generator().manual_seed(args.seed)
     if args.resume and os.path.exists(checkpoint_path):
         state = torch.load(checkpoint_path, map_location=device,
                            weights_only=False)
@@ -449,9 +501,16 @@ def train(args) -> Dict:
         schedule.load_state_dict(state['schedule'])
         history = state['history']
         start_epoch = state['epoch'] + 1
+        if 'rng' in state:
+            set_rng_state(state['rng'], generator)
+        else:
+            warnings.warn(f"'{checkpoint_path}' holds no random number "
+                          f"generator states (an older version wrote it): "
+                          f"the resumed epochs shuffle and augment as the "
+                          f"first ones did, unlike an uninterrupted run",
+                          UserWarning, stacklevel=2)
         print(f"resuming from epoch {state['epoch']} of {checkpoint_path}")
 
-    generator = torch.Generator().manual_seed(args.seed)
     train_loader = DataLoader(train_set, args.batch_size, shuffle=True,
                               drop_last=len(train_set) > args.batch_size,
                               generator=generator)
@@ -503,6 +562,7 @@ def train(args) -> Dict:
                                'optimizer': optimizer.state_dict(),
                                'schedule': schedule.state_dict(),
                                'history': history, 'epoch': epoch,
+                               'rng': rng_state(generator),
                                'args': vars(args)}, checkpoint_path)
             plot_history(history, os.path.join(args.out,
                                                'learning_curve.png'),

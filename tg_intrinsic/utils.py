@@ -9,26 +9,91 @@ from typing import Any
 import torch
 
 
-def atomic_write(path: str, write, mode: str):
+# Temporary files of atomic writes start with this, e.g.
+# '.tmp-k2j4h8checkpoint.pt'; a process killed while writing leaves one.
+TEMPORARY_PREFIX = '.tmp-'
+
+
+def _temporary_beside(path: str, make_folder: bool):
+    """``(descriptor, name)`` of a new temporary file in ``path``'s folder,
+    which is created when ``make_folder``. A missing folder is named in
+    the error (not the temporary file, which the user never asked for)."""
+    folder = os.path.dirname(os.path.abspath(path))
+    if make_folder:
+        os.makedirs(folder, exist_ok=True)
+    try:
+        return tempfile.mkstemp(dir=folder, prefix=TEMPORARY_PREFIX,
+                                suffix=os.path.basename(path))
+    except (FileNotFoundError, NotADirectoryError):
+        if os.path.isdir(folder):
+            raise
+        problem = 'is not a folder' if os.path.exists(folder) else \
+            'does not exist'
+        raise FileNotFoundError(
+            f"cannot write '{path}': the folder '{folder}' {problem}; "
+            f"create it first (e.g. os.makedirs) or write the file "
+            f"elsewhere") from None
+
+
+def _move_into_place(temporary: str, path: str):
+    # mkstemp creates 0600 files; give the result the usual permissions.
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(temporary, 0o666 & ~umask)
+    os.replace(temporary, path)
+
+
+def atomic_write(path: str, write, mode: str, make_folder: bool = True):
     """Calls ``write(f)`` on a temporary file beside ``path`` (opened with
     ``mode``) and renames it onto ``path``: readers see the old file or the
-    whole new one, never a part."""
-    folder = os.path.dirname(os.path.abspath(path))
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix='.tmp-',
-                               suffix=os.path.basename(path))
+    whole new one, never a part. The folder is created if missing, unless
+    ``make_folder=False``: then a missing folder raises a
+    :class:`FileNotFoundError` that names it."""
+    fd, tmp = _temporary_beside(path, make_folder)
     try:
         with os.fdopen(fd, mode) as f:
             write(f)
-        # mkstemp creates 0600 files; give the result the usual permissions.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
+        _move_into_place(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.remove(tmp)
         raise
+
+
+def atomic_write_file(path: str, write_to, make_folder: bool = True):
+    """:func:`atomic_write` for writers that take a file name:
+    ``write_to(temporary)`` writes a temporary file beside ``path`` (with
+    the same extension) that then replaces ``path``."""
+    fd, tmp = _temporary_beside(path, make_folder)
+    os.close(fd)
+    try:
+        write_to(tmp)
+        _move_into_place(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def remove_temporaries(folder: str) -> list:
+    """Removes the temporary files that atomic writes into ``folder`` left
+    behind when their process was killed (names starting with
+    :data:`TEMPORARY_PREFIX`); returns their names. Call it only where no
+    other process is writing into ``folder``."""
+    removed = []
+    try:
+        names = sorted(os.listdir(folder))
+    except FileNotFoundError:
+        return removed
+    for name in names:
+        path = os.path.join(folder, name)
+        if name.startswith(TEMPORARY_PREFIX) and os.path.isfile(path):
+            try:
+                os.remove(path)
+            except FileNotFoundError:
+                continue
+            removed.append(name)
+    return removed
 
 
 def atomic_write_json(path: str, obj: Any):

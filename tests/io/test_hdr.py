@@ -178,9 +178,58 @@ def test_runs_and_literals_across_chunk_limits(tmp_path):
 
 
 def test_write_into_missing_folder_leaves_nothing(tmp_path):
-    with pytest.raises(FileNotFoundError):
+    # the error names the missing folder and what to do, not the
+    # temporary file write_hdr would have written first
+    with pytest.raises(FileNotFoundError, match=r"cannot write '.*x\.hdr': "
+                       r"the folder '.*no' does not exist; create it first"
+                       ) as info:
         write_hdr(tmp_path / 'no' / 'x.hdr', hdr_image())
+    assert '.tmp' not in str(info.value)
     assert list(tmp_path.iterdir()) == []
+    (tmp_path / 'file').write_text('')
+    with pytest.raises(FileNotFoundError, match=r"folder '.*file' is not a "
+                       r"folder"):
+        write_hdr(tmp_path / 'file' / 'x.hdr', hdr_image())
+
+
+def test_written_files_get_the_usual_permissions(tmp_path):
+    # written through a temporary file (mkstemp makes them 0600)
+    path = tmp_path / 'x.hdr'
+    write_hdr(path, hdr_image())
+    umask = os.umask(0)
+    os.umask(umask)
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+def test_header_larger_than_the_data_is_rejected_before_allocating(
+        tmp_path):
+    # 1e8 x 1e8 pixels would be 35 PiB to decode (a MemoryError before):
+    # no encoding fits them in 24 bytes
+    path = save(tmp_path, header(b'-Y 100000000 +X 100000000') + bytes(24))
+    with pytest.raises(ValueError, match=r"header says 100000000 x 100000000 "
+                       r"pixels but the file has 24 bytes of pixel data, "
+                       r"fewer than the 2000000000 any encoding needs"):
+        read_hdr(path)
+    # also a plausible header over too short a flat stream
+    path = save(tmp_path, header(b'-Y 20 +X 3') + bytes(24), 'short.hdr')
+    with pytest.raises(ValueError, match=r"20 x 3 pixels but the file has 24 "
+                       r"bytes"):
+        read_hdr(path)
+
+
+def test_shortest_old_style_runs_pass_the_size_check(tmp_path):
+    # the bound is the most compact encoding: per scanline one pixel and
+    # old-style run markers whose counts are the bytes of one number
+    # (69999 = 0x01116f: three markers)
+    line = bytes([64, 32, 16, 137, 1, 1, 1, 0x6f, 1, 1, 1, 0x11,
+                  1, 1, 1, 0x01])
+    image = read_hdr(save(tmp_path, header(b'-Y 2 +X 70000') + 2 * line))
+    assert image.shape == (2, 70000, 3)
+    np.testing.assert_array_equal(image, np.broadcast_to([128, 64, 32],
+                                                         image.shape))
+    with pytest.raises(ValueError, match='fewer than the 32 any encoding'):
+        read_hdr(save(tmp_path, header(b'-Y 2 +X 70000') + 2 * line[:-1],
+                      'cut.hdr'))
 
 
 # ---------------------------------------------------------------- oracles

@@ -109,7 +109,13 @@ class MeshFolder(FolderDataset):
     :obj:`.off` files are parsed directly (ModelNet's malformed
     :obj:`OFF490 518 0` header included); :obj:`.obj` and :obj:`.ply` files
     are read with :obj:`trimesh` (:obj:`process=False`). Polygons become
-    triangle fans. The processed data are cached in
+    triangle fans. A face that repeats a vertex (e.g. the OBJ line
+    :obj:`f 1 1 2`) is an error, as are face indices out of range: the
+    :class:`ValueError` names the file, the first such triangle and, for
+    :obj:`.obj` and :obj:`.off` files, its line, and says how to remove
+    them (:func:`~tg_intrinsic.io.read_surface`). Such faces are not
+    dropped silently, because per-face label files count them. The
+    processed data are cached in
     :obj:`root/processed_tg_intrinsic*/` with a manifest of the input files
     (names, sizes, modification times): adding, removing or changing a
     mesh or label file re-reads the folder.
@@ -141,8 +147,8 @@ class MeshFolder(FolderDataset):
 
     Raises:
         ValueError: if :obj:`root` is not a folder or does not follow the
-            layout, or naming the file: a mesh that cannot be read, a
-            missing label file, or labels that are not integers, are
+            layout, or naming the file: a mesh that cannot be read or has
+            faces that repeat a vertex, a missing label file, or labels that are not integers, are
             negative, out of range, or whose count matches no vertex, face
             or edge count of the mesh.
 

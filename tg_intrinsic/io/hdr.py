@@ -15,12 +15,13 @@ mantissa, so a round trip is accurate to half a step.
 """
 import os
 import re
-import tempfile
 import warnings
 
 import numpy as np
 import torch
 from numba import njit
+
+from tg_intrinsic.utils import atomic_write
 
 _MAGIC = (b'#?RADIANCE', b'#?RGBE')
 _RESOLUTION = re.compile(rb'^([+-])([XY]) +(\d+) +([+-])([XY]) +(\d+)$')
@@ -209,6 +210,29 @@ def _parse_header(data: bytes, path: str):
     return newline + 1, divisor, orientation
 
 
+def _min_scanline_bytes(width: int) -> int:
+    """The fewest bytes any encoding the decoder accepts needs for one
+    scanline of ``width`` pixels: flat pixels take 4 bytes each, a new-style
+    RLE scanline at least its 4-byte marker and 2 bytes per channel for
+    every 127 pixels, and the most compact, old-style runs, one 4-byte pixel
+    and 4-byte run markers whose counts are consecutive bytes of one number
+    (so ``ceil(bits(width - 1) / 8)`` of them)."""
+    markers = -(-(width - 1).bit_length() // 8)
+    return 4 + 4 * markers
+
+
+def _check_pixel_bytes(path: str, available: int, lines: int, width: int):
+    """A header claiming more pixels than the data could hold in any
+    encoding is rejected before memory is allocated for them."""
+    needed = lines * _min_scanline_bytes(width)
+    if available < needed:
+        raise ValueError(f"'{path}': its header says {lines} x {width} "
+                         f"pixels but the file has {available} bytes of "
+                         f"pixel data, fewer than the {needed} any encoding "
+                         f"needs; the file is truncated or its resolution "
+                         f"line is wrong")
+
+
 def _rgbe_to_float(rgbe: np.ndarray) -> np.ndarray:
     exponent = rgbe[..., 3].astype(np.int64)
     scale = np.where(exponent > 0, np.ldexp(1.0, exponent - 136), 0.0)
@@ -261,14 +285,22 @@ def read_hdr(path) -> np.ndarray:
     Raises:
         FileNotFoundError: If there is no such file.
         ValueError: If it is not RGBE, stores XYZ, or is truncated or
-            corrupt.
+            corrupt, or its header claims more pixels than its data could
+            hold in any encoding (checked before decoding, so a corrupt
+            resolution line cannot make it allocate terabytes).
     """
     path = os.fspath(path)
     with open(path, 'rb') as f:
         data = f.read()
     pos, divisor, (s1, a1, n1, s2, a2, n2) = _parse_header(data, path)
+    _check_pixel_bytes(path, len(data) - pos, n1, n2)
     buffer = np.frombuffer(data, np.uint8)
-    rgbe = np.zeros((n1, n2, 4), np.uint8)
+    try:
+        rgbe = np.zeros((n1, n2, 4), np.uint8)
+    except MemoryError:
+        raise ValueError(f"'{path}': its header says {n1} x {n2} pixels, "
+                         f"{4 * n1 * n2 / 2 ** 30:.1f} GiB to decode, more "
+                         f"than this machine can allocate") from None
     status, line, _ = _decode_rgbe(buffer, pos, n1, n2, rgbe)
     if status == _TRUNCATED:
         raise ValueError(f"'{path}' is truncated: its data ends in scanline "
@@ -330,6 +362,12 @@ def write_hdr(path, image) -> None:
         path (str or os.PathLike): The file.
         image (numpy.ndarray or torch.Tensor): Finite, non-negative
             :math:`(H, W, 3)` floating-point radiance.
+
+    Raises:
+        FileNotFoundError: If the folder of ``path`` does not exist (it is
+            not created); the message names the folder.
+        ValueError: If ``image`` is not finite, non-negative
+            :math:`(H, W, 3)` floating-point radiance.
     """
     path = os.fspath(path)
     image = _as_numpy_image(image)
@@ -344,18 +382,12 @@ def write_hdr(path, image) -> None:
     header = (b'#?RADIANCE\n# written by tg_intrinsic\n'
               b'FORMAT=32-bit_rle_rgbe\n\n'
               + f'-Y {height} +X {width}\n'.encode())
-    folder = os.path.dirname(os.path.abspath(path))
-    handle, temporary = tempfile.mkstemp(
-        dir=folder, prefix='.' + os.path.basename(path) + '.', suffix='.tmp')
-    try:
-        with os.fdopen(handle, 'wb') as f:
-            f.write(header)
-            f.write(body)
-        os.replace(temporary, path)
-    except BaseException:
-        if os.path.exists(temporary):
-            os.remove(temporary)
-        raise
+
+    def write(f):
+        f.write(header)
+        f.write(body)
+
+    atomic_write(path, write, 'wb', make_folder=False)
 
 
 def read_exr(path) -> np.ndarray:

@@ -22,8 +22,9 @@ def read_mesh(path: str) -> Tuple[np.ndarray, np.ndarray]:
     fans.
 
     Raises a :class:`ValueError` that names the file if it cannot be read,
-    holds no triangles, has NaN or infinite coordinates, or faces that
-    index past the vertex count.
+    holds no triangles, has NaN or infinite coordinates, faces that index
+    past the vertex count, or faces that repeat a vertex (see
+    :func:`read_surface`).
     """
     pos, face, _ = read_surface(path)
     if face is None:
@@ -39,7 +40,14 @@ def read_surface(path: str) -> Tuple[np.ndarray, Optional[np.ndarray],
     ``x, y, z`` by name (``nx``, ``red``, ``quality``, ...; empty for other
     formats).
 
-    Raises a :class:`ValueError` that names the file and the problem.
+    Raises a :class:`ValueError` that names the file and the problem: the
+    file cannot be read, has no vertices, NaN or infinite coordinates,
+    faces that index outside the vertices, or faces that repeat a vertex
+    (e.g. the OBJ line ``f 1 1 2``). Such a degenerate face is an error,
+    like an index out of range, and not dropped: the message names the
+    first one (its triangle index and, for OBJ and OFF files, its line)
+    and says how to remove them. The geometry code rejects such triangles
+    too, but could not name the file.
     """
     path = os.fspath(path)
     if not osp.exists(path):
@@ -86,7 +94,68 @@ def read_surface(path: str) -> Tuple[np.ndarray, Optional[np.ndarray],
     if face is not None and (face.min() < 0 or face.max() >= len(pos)):
         raise ValueError(f"'{path}' has face indices outside [0, "
                          f"{len(pos) - 1}] (the vertex count is {len(pos)})")
+    if face is not None:
+        _check_repeated_corners(path, ext, face)
     return pos, face, properties
+
+
+def _check_repeated_corners(path: str, ext: str, face: np.ndarray):
+    """Raises a :class:`ValueError` naming the file, the first triangle and
+    (OBJ, OFF) the first face line that repeat a vertex."""
+    repeated = (face[:, 0] == face[:, 1]) | (face[:, 1] == face[:, 2]) | \
+        (face[:, 0] == face[:, 2])
+    if not repeated.any():
+        return
+    bad = np.flatnonzero(repeated)
+    first = int(bad[0])
+    try:
+        line = _first_repeating_face_line(path, ext)
+    except Exception:  # only for the message: never hide the real error
+        line = None
+    where = '' if line is None else \
+        f", from line {line[0]}: {line[1][:60]!r}"
+    raise ValueError(
+        f"'{path}' has {bad.size} triangle(s) that repeat a vertex (first: "
+        f"triangle {first}, vertices {face[first].tolist()} counted from "
+        f"0{where}); such a face has no area and the geometry code rejects "
+        f"it. Delete these faces from the file, or repair it, e.g. with "
+        f"trimesh: m = trimesh.load(path, process=False); "
+        f"m.update_faces(m.nondegenerate_faces()); m.export(path)")
+
+
+def _first_repeating_face_line(path: str, ext: str
+                               ) -> Optional[Tuple[int, str]]:
+    """``(line number from 1, text)`` of the first OBJ or OFF face line
+    whose corners repeat a vertex, or :obj:`None`."""
+    with open(path, 'r', errors='replace') as f:
+        numbered = [(k + 1, raw.strip(), raw.split('#', 1)[0].split())
+                    for k, raw in enumerate(f)]
+    if ext == '.obj':
+        vertices = 0
+        for number, text, tokens in numbered:
+            if not tokens:
+                continue
+            if tokens[0] == 'v':
+                vertices += 1
+            elif tokens[0] == 'f':
+                corners = [int(t.split('/')[0]) for t in tokens[1:]]
+                corners = [c - 1 if c > 0 else vertices + c for c in corners]
+                if len(set(corners)) < len(corners):
+                    return number, text
+        return None
+    if ext == '.off':
+        numbered = [item for item in numbered if item[2]]
+        rest = numbered[0][2]
+        rest = ' '.join(rest)[' '.join(rest).upper().index('OFF') + 3:]
+        i = 1
+        if not rest.split():
+            rest, i = ' '.join(numbered[1][2]), 2
+        nv, nf = (int(v) for v in rest.split()[:2])
+        for number, text, tokens in numbered[i + nv:i + nv + nf]:
+            corners = tokens[1:int(tokens[0]) + 1]
+            if len(set(int(c) for c in corners)) < len(corners):
+                return number, text
+    return None
 
 
 def _ply_vertex_properties(loaded, num_vertices: int

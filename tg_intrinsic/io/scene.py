@@ -24,7 +24,6 @@ import json
 import os
 import os.path as osp
 import re
-import tempfile
 import warnings
 from typing import List, Optional
 
@@ -32,7 +31,7 @@ import numpy as np
 import torch
 from torch_geometric.data import Data
 
-from tg_intrinsic.utils import atomic_write
+from tg_intrinsic.utils import atomic_write, atomic_write_file
 
 from .hdr import looks_clipped, read_envmap, read_exr, read_hdr, write_hdr
 from .mesh import MESH_EXTENSIONS, read_surface, write_ply
@@ -627,18 +626,12 @@ def _write_exr(path: str, image: np.ndarray):
     import OpenEXR
     header = {'compression': OpenEXR.ZIP_COMPRESSION,
               'type': OpenEXR.scanlineimage}
-    folder = osp.dirname(osp.abspath(path))
-    handle, temporary = tempfile.mkstemp(
-        dir=folder, prefix='.' + osp.basename(path) + '.', suffix='.exr')
-    os.close(handle)
-    try:
+
+    def write_to(temporary):
         with OpenEXR.File(header, {'RGB': image}) as f:
             f.write(temporary)
-        os.replace(temporary, path)
-    except BaseException:
-        if osp.exists(temporary):
-            os.remove(temporary)
-        raise
+
+    atomic_write_file(path, write_to, make_folder=False)
 
 
 def scene_summary(data: Data) -> str:

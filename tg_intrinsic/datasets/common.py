@@ -67,14 +67,6 @@ def check_split(split, splits=('train', 'test')):
     return check_option(split, 'split', splits)
 
 
-def check_int(value, name, minimum):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"'{name}' must be an integer, got {value!r}")
-    if value < minimum:
-        raise ValueError(f"'{name}' must be at least {minimum}, got {value}")
-    return int(value)
-
-
 def fmt(value):
     """Short, file-name safe text of a generation parameter."""
     if isinstance(value, (bool, np.bool_)):

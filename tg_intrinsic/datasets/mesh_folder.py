@@ -7,6 +7,7 @@ import numpy as np
 import torch
 
 from tg_intrinsic.data import IntrinsicData
+from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.geometry.mesh import weld_vertices
 from tg_intrinsic.io.labels import (LABEL_KINDS, check_labels,
                                     edge_label_scores, face_label_scores,
@@ -14,7 +15,7 @@ from tg_intrinsic.io.labels import (LABEL_KINDS, check_labels,
                                     read_soft_labels, scores_to_labels)
 from tg_intrinsic.io.mesh import read_mesh
 
-from .common import (FolderDataset, check_int, check_option, check_task,
+from .common import (FolderDataset, check_option, check_task,
                       find_label_file, list_files)
 
 EXTENSIONS = ('.obj', '.off', '.ply')
@@ -181,9 +182,9 @@ class MeshFolder(FolderDataset):
         check_option(label_kind, 'label_kind', LABEL_KINDS)
         self.label_kind = label_kind
         self.label_offset = None if label_offset is None else \
-            check_int(label_offset, 'label_offset', 0)
+            check_positive_int(label_offset, 'label_offset', 0)
         self.num_classes_arg = None if num_classes is None else \
-            check_int(num_classes, 'num_classes', 1)
+            check_positive_int(num_classes, 'num_classes', 1)
         super().__init__(root, split, transform, pre_transform, pre_filter,
                          log, force_reload)
         self.classes: Optional[List[str]] = self.meta['classes']

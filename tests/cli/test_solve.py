@@ -213,7 +213,8 @@ def test_a_solve_that_does_not_converge_warns(files, tmp_path, capsys):
                                 '--signal', paths['npy'], '--out', out,
                                 '--max-cycles', '1'] + HIERARCHY, capsys)
     assert code == 0, stderr
-    assert 'tg-intrinsic: warning: Gravo MG stopped after 1 cycles' in stderr
+    assert 'tg-intrinsic: warning: GravoMG.solve did not converge: stopped at ' \
+        'max_iter=1 cycles' in stderr, stderr
     assert 'NOT converged' in stdout
     with open(os.path.join(out, 'report.json')) as f:
         solver = json.load(f)['solver']

@@ -250,6 +250,45 @@ def explained(message, inputs):
         return len(first) > 0 and bool(
             (total[first].norm(dim=-1) <= 1e-4 * cross.norm(dim=-1).max()
              ).all())
+    if message == ("'face' holds no triangles, so there is no Laplacian "
+                   "to build") or message.startswith("'face' has no "
+                                                     "triangles"):
+        return face is not None and face.dim() == 2 and face.size(1) == 0
+    match = re.match(r"'(eps|radius)' must be (finite|positive), got (.*)$",
+                     message)
+    if match:
+        value = inputs[match[1]]
+        return not (value == value and abs(value) != float('inf')) \
+            if match[2] == 'finite' else value <= 0
+    match = re.match(r"(\d+) point\(s\) \(first: \[([\d, ]*)\]\) have an "
+                     r"empty Voronoi cell: their (\d+) nearest neighbours "
+                     r"project onto them in the tangent plane", message)
+    if match:
+        p, normal = pos.double(), inputs['normal'].double()
+        normal = normal / normal.norm(dim=1, keepdim=True)
+        scale = float((p - p.mean(0)).norm(dim=1).max()) + 1e-300
+        for i in _ints(match[2]):
+            offset = p - p[i]
+            flat = offset - (offset @ normal[i])[:, None] * normal[i]
+            near = offset.norm(dim=1).argsort()[1:int(match[3]) + 1]
+            if bool((flat[near].norm(dim=1) > 1e-9 * scale).any()):
+                return False
+        return True
+    match = re.match(r"'pos' has (\d+) points but k=(\d+) neighbours are "
+                     r"needed per point; lower k", message)
+    if match:
+        return int(match[1]) == pos.size(0) <= int(match[2])
+    match = re.match(r"eps=(\S+) is smaller than the spacing of the "
+                     r"points: every disc holds only its centre", message)
+    if match:
+        p = pos.double()
+        if face is None:
+            gaps = torch.cdist(p, p) + torch.diag(
+                torch.full((p.size(0), ), float('inf'), dtype=p.dtype))
+        else:
+            gaps = (p[face] - p[face.roll(1, 0)]).norm(dim=-1)
+        return float(match[1]) == inputs['eps'] and \
+            bool((gaps >= inputs['eps']).all())
     if message == 'the mesh has zero surface area; cannot normalise it':
         area, longest = _areas(pos, face)
         return bool(area.sum() <= 1e-12 * longest.max().clamp_min(1e-300)) \

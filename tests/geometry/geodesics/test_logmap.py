@@ -567,15 +567,19 @@ def test_malformed_input_raises_or_is_finite(data):
     n = pos.size(0) if pos.dim() > 0 else 0
     face = data.draw(st.one_of(st.none(), face_arrays(n)))
     eps = data.draw(st.sampled_from([-1.0, 0.0, 0.5, float('nan'), 3.0]))
-    out = call(geodesic_neighbourhoods, pos, eps, face=face)
+    inputs = dict(pos=pos, face=face, n=n, eps=eps)
+    out = call(geodesic_neighbourhoods, pos, eps, face=face, inputs=inputs)
     if out is None:
         return
     assert_valid(out, n)
     edge_index, dist = out
     assert (dist < eps).all() and edge_index.max() < n
-    frame = call(tangent_frames, pos)  # points as normals: any valid gauge
-    for result in (call(log_map, pos, edge_index, frame, face=face),
-                   call(vertex_area_weights, pos, face=face, normal=pos)):
+    # points as normals: any valid gauge
+    frame = call(tangent_frames, pos, inputs=inputs)
+    for result in (call(log_map, pos, edge_index, frame, face=face,
+                        inputs=inputs),
+                   call(vertex_area_weights, pos, face=face, normal=pos,
+                        inputs=dict(inputs, normal=pos))):
         if result is not None:
             assert_valid(result, n)
 

@@ -898,8 +898,11 @@ def vertex_area_weights(pos: Tensor, face: Optional[Tensor] = None,
     if not bool(np.all(area > 0)):
         bad = np.flatnonzero(~(area > 0))
         raise ValueError(f"{bad.size} point(s) (first: {bad[:5].tolist()}) "
-                         f"have an empty Voronoi cell: their neighbours "
-                         f"coincide with them; remove duplicate points")
+                         f"have an empty Voronoi cell: their {k} nearest "
+                         f"neighbours project onto them in the tangent plane "
+                         f"(duplicate points, or normals along the offsets "
+                         f"to the neighbours); remove duplicate points or "
+                         f"check the normals")
     return torch.from_numpy(area).to(pos.dtype).to(pos.device)
 
 

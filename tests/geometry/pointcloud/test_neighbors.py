@@ -619,3 +619,15 @@ def test_property_malformed_inputs(data, k, loop, fn, dense, r, ratio):
                 assert bool((out[0] != out[1]).all())
             if not (dense and x.dtype == torch.float32):  # exact on CPU
                 check_radius(out, x, r, k, b, loop)
+
+
+def test_radius_finds_coincident_points():
+    # all points in one place: the search reach used to collapse to zero
+    # and even the self-pairs were lost
+    from tg_intrinsic.geometry import radius
+    for n in (1, 2, 5):
+        edge_index = radius(torch.zeros(n, 3, dtype=torch.float64), 0.5,
+                            max_num_neighbors=n, loop=True)
+        assert edge_index.size(1) == n * n
+        assert radius(torch.zeros(n, 3), 0.5, max_num_neighbors=n,
+                      loop=False).size(1) == n * (n - 1)

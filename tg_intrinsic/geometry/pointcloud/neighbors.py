@@ -258,7 +258,10 @@ def _radius_tree(x: Tensor, r: float, batch: Optional[Tensor], cap: int,
     diag = float(np.linalg.norm(allp.max(0) - allp.min(0)))
     # Search slightly beyond r (the tree rounds differently), then filter by
     # the exact squared distance. Beyond the diagonal nothing more is found.
-    reach = float(np.nextafter(min(r, diag) * (1 + 1e-6), np.inf))
+    # (All points coincident: diag = 0 would make the reach 0, and the
+    # tree compares squared distances, so even self-pairs would be lost.)
+    reach = float(np.nextafter((min(r, diag) if diag > 0 else r)
+                               * (1 + 1e-6), np.inf))
     xt, qt, _ = _tree_coords(xn, bx, qn, bq, reach)
     tree = cKDTree(xt, balanced_tree=False)
     r2 = r * r

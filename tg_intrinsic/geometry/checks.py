@@ -188,13 +188,7 @@ def check_edge_index(edge_index, num: int, ref: Tensor,
                      what: str = 'points', ref_name: str = 'pos') -> Tensor:
     """Validates an ``edge_index [2, E]``: long, on ``ref``'s device, in
     range; ``what`` names the ``num`` things it indexes."""
-    edge_index = check_tensor(edge_index, 'edge_index')
-    if edge_index.dim() != 2 or edge_index.size(0) != 2:
-        raise ValueError(f"'edge_index' must have shape [2, E], got "
-                         f"{list(edge_index.shape)}")
-    if edge_index.dtype != torch.long:
-        raise ValueError(f"'edge_index' must be torch.long, got "
-                         f"{edge_index.dtype}")
+    edge_index = _check_pairs(edge_index, 'edge_index', 'E')
     same_device(edge_index, 'edge_index', ref, ref_name)
     _check_range(edge_index, 'edge_index', num, what)
     return edge_index
@@ -215,6 +209,18 @@ def check_index(index, name: str, num: Optional[int], ref: Tensor,
                          f"{name}.long()")
     same_device(index, name, ref, ref_name)
     _check_range(index, name, num, what)
+    return index
+
+
+def _check_pairs(index, name: str, size: str) -> Tensor:
+    """A ``[2, size]`` tensor of torch.long indices."""
+    index = check_tensor(index, name)
+    if index.dim() != 2 or index.size(0) != 2:
+        raise ValueError(f"'{name}' must have shape [2, {size}], got "
+                         f"{list(index.shape)}")
+    if index.dtype != torch.long:
+        raise ValueError(f"'{name}' must be torch.long, got {index.dtype}; "
+                         f"convert it with {name}.long()")
     return index
 
 
@@ -385,13 +391,7 @@ def check_prolongation(x: Tensor, prolong_index: Tensor,
     if x.dim() == 0 or not (x.is_floating_point() or x.is_complex()):
         raise ValueError(f"'x' must be float features [N, *], got "
                          f"{x.dtype} of shape {list(x.shape)}")
-    prolong_index = check_tensor(prolong_index, 'prolong_index')
-    if prolong_index.dim() != 2 or prolong_index.size(0) != 2:
-        raise ValueError(f"'prolong_index' must be [2, nnz], got "
-                         f"{list(prolong_index.shape)}")
-    if prolong_index.dtype != torch.long:
-        raise ValueError(f"'prolong_index' must hold integer indices of "
-                         f"dtype torch.long, got {prolong_index.dtype}")
+    prolong_index = _check_pairs(prolong_index, 'prolong_index', 'nnz')
     prolong_weight = check_tensor(prolong_weight, 'prolong_weight')
     if prolong_weight.shape != prolong_index.shape[1:]:
         raise ValueError("'prolong_weight' must hold one weight per column "

@@ -18,7 +18,7 @@ from torch_geometric.data import Data
 
 from tg_intrinsic.geometry.checks import (check_edge_index, check_faces,
                                           check_frames, check_points,
-                                          check_vectors)
+                                          check_referenced, check_vectors)
 from tg_intrinsic.geometry.mesh import vertex_normals
 from tg_intrinsic.geometry.pointcloud.frames import (estimate_normals,
                                                      tangent_frames)
@@ -95,13 +95,9 @@ def surface_graph(data: Data, k: int = 8) -> Tensor:
         graph = check_edge_index(data.edge_index, pos.size(0), pos)
     else:
         graph = knn(pos, min(k, pos.size(0) - 1))
-    used = torch.zeros(pos.size(0), dtype=torch.bool, device=pos.device)
-    used[graph.flatten()] = True
-    if not bool(used.all()):
-        bad = (~used).nonzero().flatten()
-        raise ValueError(f"{bad.numel()} point(s) are on no edge (first: "
-                         f"{bad[:5].tolist()}), so no level can reach "
-                         f"them; remove unreferenced vertices first")
+    check_referenced(graph, pos.size(0), 'edge',
+                     "they lie on no edge, so no level can reach them; "
+                     "remove unreferenced vertices first")
     return graph
 
 

@@ -172,6 +172,19 @@ def check_faces(face, num_vertices: int, ref: Tensor, name: str = 'face',
     return face
 
 
+def check_referenced(index: Tensor, num_vertices: int, what: str,
+                     todo: str):
+    """Every one of ``num_vertices`` vertices appears in ``index`` (the
+    triangles or edges, ``what``); ``todo`` says why it matters and what to
+    do."""
+    used = torch.zeros(num_vertices, dtype=torch.bool, device=index.device)
+    used[index.flatten()] = True
+    if not bool(used.all()):
+        bad = (~used).nonzero().flatten()
+        raise ValueError(f"{bad.numel()} vertex/vertices are not referenced "
+                         f"by any {what} (first: {bad[:5].tolist()}); {todo}")
+
+
 def check_nondegenerate(area: Tensor, scale: Tensor, name: str = 'face'):
     """Raises if a triangle's area is (numerically) zero."""
     tol = torch.finfo(area.dtype).eps * 16

@@ -11,7 +11,11 @@ import torch
 from torch import Tensor
 
 from .checks import (check_faces, check_nondegenerate, check_points,
+                     check_referenced,
                       check_positive_float, check_positive_int)
+
+
+_UNREFERENCED = "drop them with remove_unreferenced_vertices(pos, face)"
 
 
 def _check_mesh(pos, face) -> Tuple[Tensor, Tensor]:
@@ -33,13 +37,19 @@ def _cross_and_scale(pos: Tensor, face: Tensor) -> Tuple[Tensor, Tensor]:
     return cross, scale
 
 
-def _nondegenerate_areas(pos: Tensor, face: Tensor) -> Tensor:
-    """Triangle areas, refusing zero-area triangles (the functions that
-    divide by areas or normalise by them)."""
+def triangle_cross(pos: Tensor, face: Tensor) -> Tensor:
+    r"""The cross products :math:`(p_1 - p_0) \times (p_2 - p_0)` of the
+    triangles (twice their area vectors) of a checked mesh, refusing
+    zero-area triangles: what every function that divides by areas or
+    normalises by them starts from.
+
+    Shapes:
+        - **input:** pos :math:`(N, 3)`, face :math:`(3, F)`
+        - **output:** :math:`(F, 3)`
+    """
     cross, scale = _cross_and_scale(pos, face)
-    area = 0.5 * cross.norm(dim=-1)
-    check_nondegenerate(area, scale)
-    return area
+    check_nondegenerate(0.5 * cross.norm(dim=-1), scale)
+    return cross
 
 
 def face_areas(pos: Tensor, face: Tensor) -> Tensor:
@@ -78,10 +88,8 @@ def face_normals(pos: Tensor, face: Tensor) -> Tensor:
         - **output:** :math:`(F, 3)`
     """
     pos, face = _check_mesh(pos, face)
-    cross, scale = _cross_and_scale(pos, face)
-    norm = cross.norm(dim=-1)
-    check_nondegenerate(0.5 * norm, scale)
-    return cross / norm.unsqueeze(-1)
+    cross = triangle_cross(pos, face)
+    return cross / cross.norm(dim=-1, keepdim=True)
 
 
 def vertex_normals(pos: Tensor, face: Tensor) -> Tensor:
@@ -97,9 +105,8 @@ def vertex_normals(pos: Tensor, face: Tensor) -> Tensor:
         - **output:** :math:`(N, 3)`
     """
     pos, face = _check_mesh(pos, face)
-    _check_referenced(face, pos.size(0))
-    cross, scale = _cross_and_scale(pos, face)
-    check_nondegenerate(0.5 * cross.norm(dim=-1), scale)
+    check_referenced(face, pos.size(0), 'triangle', _UNREFERENCED)
+    cross = triangle_cross(pos, face)
     normal = torch.zeros_like(pos)
     for corner in range(3):  # three scatters, not a loop over faces
         normal.index_add_(0, face[corner], cross)
@@ -112,16 +119,6 @@ def vertex_normals(pos: Tensor, face: Tensor) -> Tensor:
                          f"triangles cancel out; the mesh is not a manifold "
                          f"surface there")
     return normal / norm.unsqueeze(-1)
-
-
-def _check_referenced(face: Tensor, num_vertices: int):
-    used = torch.zeros(num_vertices, dtype=torch.bool, device=face.device)
-    used[face.flatten()] = True
-    if not bool(used.all()):
-        bad = (~used).nonzero().flatten()
-        raise ValueError(f"{bad.numel()} vertex/vertices are not referenced by"
-                         f" any triangle (first: {bad[:5].tolist()}); drop "
-                         f"them with remove_unreferenced_vertices(pos, face)")
 
 
 def lumped_mass(pos: Tensor, face: Tensor) -> Tensor:
@@ -137,8 +134,8 @@ def lumped_mass(pos: Tensor, face: Tensor) -> Tensor:
         - **output:** :math:`(N)`, the diagonal of :math:`M`
     """
     pos, face = _check_mesh(pos, face)
-    _check_referenced(face, pos.size(0))
-    area = _nondegenerate_areas(pos, face) / 3.0
+    check_referenced(face, pos.size(0), 'triangle', _UNREFERENCED)
+    area = 0.5 * triangle_cross(pos, face).norm(dim=-1) / 3.0
     mass = torch.zeros(pos.size(0), dtype=pos.dtype, device=pos.device)
     for corner in range(3):
         mass.index_add_(0, face[corner], area)
@@ -157,9 +154,7 @@ def cotan_weights(pos: Tensor, face: Tensor) -> Tensor:
         - **output:** :math:`(F, 3)`
     """
     pos, face = _check_mesh(pos, face)
-    cross, scale = _cross_and_scale(pos, face)
-    double_area = cross.norm(dim=-1)
-    check_nondegenerate(0.5 * double_area, scale)
+    double_area = triangle_cross(pos, face).norm(dim=-1)
     p = _corners(pos, face)
     cots = []
     for c in range(3):
@@ -337,7 +332,7 @@ def normalize_area(pos: Tensor, face: Tensor, area: float = 1.0) -> Tensor:
     """
     pos, face = _check_mesh(pos, face)
     area = check_positive_float(area, 'area')
-    face_area = _nondegenerate_areas(pos, face)
+    face_area = 0.5 * triangle_cross(pos, face).norm(dim=-1)
     total = face_area.sum()
     if not bool(total > torch.finfo(pos.dtype).tiny):
         raise ValueError("the mesh has zero surface area; cannot normalise it")

@@ -320,15 +320,13 @@ class GravoMG:
                                  "point")
             weight = 1.0 / mass
         if x0 is not None:
-            if tuple(x0.shape if hasattr(x0, 'shape') else
-                     np.shape(x0)) != tuple(b.shape):
+            x0 = x0 if isinstance(x0, torch.Tensor) else \
+                np.asarray(x0, dtype=np.float64)
+            if tuple(x0.shape) != tuple(b.shape):
                 raise ValueError(f"'x0' must have the shape of 'b', "
-                                 f"{tuple(b.shape)}, got "
-                                 f"{tuple(np.shape(x0))}")
-            x0_finite = bool(torch.isfinite(x0).all()) \
-                if isinstance(x0, torch.Tensor) \
-                else bool(np.isfinite(np.asarray(x0, dtype=np.float64)).all())
-            if not x0_finite:
+                                 f"{tuple(b.shape)}, got {tuple(x0.shape)}")
+            if not bool((torch.isfinite(x0) if isinstance(x0, torch.Tensor)
+                         else np.isfinite(x0)).all()):
                 raise ValueError("'x0' holds NaN or infinite entries")
         start = time.perf_counter()
         info = self.info

@@ -32,13 +32,14 @@ from numba import get_num_threads, njit, prange
 from torch import Tensor
 
 from . import vector_heat as _vector_heat
-from ..checks import (check_edge_index, check_faces, check_nondegenerate,
-                      check_points, check_positive_float, check_positive_int,
-                      check_tensor, check_vectors, same_device)
 from .fast_marching import march_from, march_many, surface_index
-from ..checks import check_frames
+from ..checks import (check_edge_index, check_faces, check_frames,
+                      check_points, check_positive_float, check_positive_int,
+                      check_referenced, check_tensor, check_vectors,
+                      same_device)
+from ..mesh import (edge_face_counts, face_areas, lumped_mass,
+                    triangle_cross, vertex_normals)
 from ..pointcloud.frames import tangent_frames
-from ..mesh import edge_face_counts, face_areas, lumped_mass, vertex_normals
 from ..pointcloud.neighbors import knn, radius
 
 __all__ = ['geodesic_neighbourhoods', 'log_map', 'vertex_area_weights',
@@ -58,21 +59,10 @@ def _check_mesh(pos: Tensor, face, strict: bool = False) -> Tensor:
     if face.size(1) == 0:
         raise ValueError("'face' has no triangles; pass face=None to treat "
                          "the points as a point cloud")
-    used = torch.zeros(pos.size(0), dtype=torch.bool, device=pos.device)
-    used[face.flatten()] = True
-    if not bool(used.all()):
-        bad = (~used).nonzero().flatten()
-        raise ValueError(f"{bad.numel()} vertex/vertices are not referenced "
-                         f"by any triangle (first: {bad[:5].tolist()}), so "
-                         f"no geodesic reaches them; drop them with "
-                         f"CleanMesh() or "
-                         f"remove_unreferenced_vertices(pos, face)")
-    p = pos.double()
-    cross = torch.linalg.cross(p[face[1]] - p[face[0]],
-                               p[face[2]] - p[face[0]])
-    scale = torch.stack([(p[face[a]] - p[face[b]]).pow(2).sum(-1)
-                         for a, b in ((0, 1), (1, 2), (2, 0))]).amax(0)
-    check_nondegenerate(0.5 * cross.norm(dim=-1), scale)
+    check_referenced(face, pos.size(0), 'triangle',
+                     "no geodesic reaches them; drop them with CleanMesh() "
+                     "or remove_unreferenced_vertices(pos, face)")
+    triangle_cross(pos.double(), face)
     if strict:
         edges, count = edge_face_counts(face, pos.size(0))
         if bool((count > 2).any()):

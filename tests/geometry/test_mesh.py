@@ -4,13 +4,14 @@ import numpy as np
 import pytest
 import robust_laplacian
 import torch
+import trimesh
 
 from tg_intrinsic.geometry import (cotan_laplacian,
                                    edge_face_counts, face_areas, face_normals,
-                                   from_scipy, is_closed_manifold,
+                                   is_closed_manifold,
                                    lumped_mass, mesh_edges, normalize_area,
                                    remove_unreferenced_vertices, to_scipy,
-                                   vertex_normals)
+                                   vertex_normals, weld_vertices)
 from tests.conftest import grid_mesh, icosphere
 
 
@@ -162,15 +163,6 @@ def test_remove_unreferenced_and_normalize_area(sphere_mesh):
     assert moved.mean(0).abs().max() < 1e-3
 
 
-def test_scipy_round_trip(sphere_mesh):
-    pos, face = sphere_mesh
-    S = cotan_laplacian(pos, face)
-    back = from_scipy(to_scipy(S))
-    assert torch.equal(back.indices(), S.indices())
-    assert torch.allclose(back.values(), S.values())
-    assert abs(to_scipy(S.to_sparse_csr()) - to_scipy(S)).max() == 0
-
-
 def test_degenerate_and_malformed_faces_raise():
     pos = torch.tensor([[0., 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]])
     collinear = torch.tensor([[0], [1], [2]])
@@ -180,6 +172,8 @@ def test_degenerate_and_malformed_faces_raise():
         face_normals(pos, collinear)
     with pytest.raises(ValueError, match='repeat a vertex'):
         cotan_laplacian(pos, torch.tensor([[0], [0], [3]]))
+    # areas are defined: a triangle that repeats a vertex has none
+    assert face_areas(pos, torch.tensor([[0], [0], [3]])).tolist() == [0.0]
     with pytest.raises(ValueError, match='only 4 vertices'):
         cotan_laplacian(pos, torch.tensor([[0], [1], [4]]))
     with pytest.raises(ValueError, match=r'pass face.t\(\)'):
@@ -232,8 +226,69 @@ def test_laplacian_spectrum_of_the_sphere_and_its_invariances():
                           for _ in range(2 * l + 1)], dtype=torch.float64)
     assert torch.allclose(spectrum, exact, rtol=0.02)
     # scale and rigid motion leave it unchanged
-    Q, _ = torch.linalg.qr(torch.randn(3, 3, dtype=torch.float64))
+    g = torch.Generator().manual_seed(0)
+    Q, _ = torch.linalg.qr(torch.randn(3, 3, dtype=torch.float64,
+                                       generator=g))
     moved = laplacian_spectrum(3.0 * pos @ Q.T + 1.0, face, 15)
     assert torch.allclose(moved, spectrum, rtol=1e-6)
     with pytest.raises(ValueError, match='at most'):
         laplacian_spectrum(*icosphere(0), 11)  # 12 vertices
+
+
+def triangle_soup():
+    """An icosphere as a triangle soup: every face its own 3 vertices."""
+    m = trimesh.creation.icosphere(subdivisions=1)
+    pos = torch.from_numpy(np.asarray(m.vertices)[np.asarray(m.faces)]
+                           .reshape(-1, 3))
+    face = torch.arange(pos.size(0)).view(-1, 3).t()
+    return pos, face, m
+
+
+def test_weld_a_triangle_soup():
+    pos, face, m = triangle_soup()
+    new_pos, new_face, inverse = weld_vertices(pos, face)
+    # independent count: trimesh's exact merge
+    ref = trimesh.Trimesh(pos.numpy(), face.t().numpy(), process=False)
+    ref.merge_vertices(merge_tex=True, merge_norm=True, digits_vertex=12)
+    assert new_pos.size(0) == len(ref.vertices) == len(m.vertices) == 42
+    assert new_face.shape == face.shape
+    assert torch.equal(new_face, inverse[face])
+    assert torch.equal(new_pos[inverse], pos)  # every vertex kept its spot
+    # faces now share vertices: a closed mesh, each edge in two faces
+    welded = trimesh.Trimesh(new_pos.numpy(), new_face.t().numpy(),
+                             process=False)
+    assert welded.is_watertight
+    # new vertices are numbered in order of first occurrence
+    first = [int((inverse == k).nonzero()[0]) for k in range(42)]
+    assert first == sorted(first)
+
+
+def test_weld_without_duplicates_is_identity():
+    m = trimesh.creation.icosphere(subdivisions=1)
+    pos = torch.from_numpy(np.asarray(m.vertices)).float()
+    face = torch.from_numpy(np.asarray(m.faces)).t().contiguous()
+    new_pos, new_face, inverse = weld_vertices(pos, face)
+    assert torch.equal(new_pos, pos) and torch.equal(new_face, face)
+    assert torch.equal(inverse, torch.arange(pos.size(0)))
+    assert new_pos.dtype == torch.float32
+
+
+def test_weld_tolerance_and_signed_zero():
+    pos, face, _ = triangle_soup()
+    gen = torch.Generator().manual_seed(0)
+    noisy = pos + 1e-9 * torch.randn(pos.shape, dtype=pos.dtype,
+                                     generator=gen)
+    assert weld_vertices(noisy, face)[0].size(0) == pos.size(0)
+    assert weld_vertices(noisy, face, tolerance=1e-6)[0].size(0) == 42
+    # -0.0 and 0.0 are the same position
+    p = torch.tensor([[0., 0, 0], [1, 0, 0], [0, 1, 0], [-0., 0, 0]])
+    f = torch.tensor([[0, 1, 2], [3, 2, 1]]).t()
+    assert weld_vertices(p, f)[2].tolist() == [0, 1, 2, 0]
+
+
+def test_weld_bad_input():
+    pos, face, _ = triangle_soup()
+    with pytest.raises(ValueError, match=r'\[3, F\]'):
+        weld_vertices(pos, face.t())
+    with pytest.raises(ValueError, match='tolerance'):
+        weld_vertices(pos, face, tolerance=-1)

@@ -1,7 +1,7 @@
 """The renderer against brute-force quadrature of the reflection integral,
 analytic answers (constant environment, white furnace by an independent 2D
-quadrature), rotation symmetry; the rasteriser against per-pixel ray
-casting in numpy; visibility and images; bad input."""
+quadrature), rotation symmetry; rendered images; bad input. The
+rasteriser's own tests are in test_raster.py."""
 import math
 
 import numpy as np
@@ -9,19 +9,18 @@ import pytest
 import torch
 from numba import njit
 
-from tg_intrinsic.geometry.appearance.envmap import (equirect_directions,
-                                          equirect_lookup,
-                                          equirect_solid_angles)
 from tg_intrinsic.datasets.capture import render_images
-from tg_intrinsic.geometry.appearance.cameras import camera_centers
 from tg_intrinsic.geometry.appearance import lighting
+from tg_intrinsic.geometry.appearance.envmap import (equirect_directions,
+                                                     equirect_lookup,
+                                                     equirect_solid_angles)
 from tg_intrinsic.geometry.appearance.lighting import render_radiance
-from tg_intrinsic.geometry.appearance.raster import (point_visibility,
-                                                     rasterize)
+from tg_intrinsic.geometry.appearance.raster import rasterize
 from tg_intrinsic.geometry.appearance.sh import (
     principled_to_torrance_sparrow, schlick_fresnel, smith_g1)
 
-D64 = torch.float64
+from tests.geometry.appearance.scenes import (D64, camera, material,
+                                              sky_with_sun, unit)
 
 
 @njit(cache=True)
@@ -33,22 +32,6 @@ def kernel_lookup(env, dirs):
                                         env.shape[0], env.shape[1])
         out[k, 0], out[k, 1], out[k, 2] = lighting._bilinear(env, row, col)
     return out
-
-
-def unit(x):
-    return x / x.norm(dim=-1, keepdim=True)
-
-
-def sky_with_sun(height=32, width=64):
-    """A smooth sky plus a sun about one pixel wide, 300x brighter."""
-    g = torch.Generator().manual_seed(0)
-    d = equirect_directions(height, width)
-    env = 0.2 + 0.5 * d[..., 2:].clamp_min(0) * torch.tensor(
-        [0.4, 0.6, 1.0], dtype=D64)
-    env = env + 0.2 * torch.rand(height, width, 3, dtype=D64, generator=g)
-    sun = unit(torch.tensor([0.5, 0.3, 0.6], dtype=D64))
-    env = env + ((d @ sun) > math.cos(0.06))[..., None].double() * 300.0
-    return env
 
 
 def scene_points(num=3, views=3, seed=1):
@@ -86,12 +69,6 @@ def brute_force(env, n, wo, base_color, metallic, roughness, rows=512):
                     / (4 * co))[..., None] * F
             out[i, v] = diffuse + (spec * weight).sum((0, 1))
     return out
-
-
-def material(num, metallic, roughness):
-    return (torch.tensor([0.8, 0.5, 0.3], dtype=D64).expand(num, 3),
-            torch.full((num, ), metallic, dtype=D64),
-            torch.full((num, ), roughness, dtype=D64))
 
 
 def test_numba_lookup_matches_torch():
@@ -236,102 +213,6 @@ def test_render_radiance_bad_input():
 
 
 # ---------------------------------------------------------- rasteriser
-def camera(eye, target=(0, 0, 0), focal=40.0, size=(40, 48)):
-    from tg_intrinsic.geometry.appearance.cameras import look_at_cameras
-    fov = 2 * math.degrees(math.atan(size[0] / 2 / focal))
-    K, E = look_at_cameras(torch.tensor([eye], dtype=D64), target, fov,
-                           size)
-    return K[0], E[0]
-
-
-def small_mesh():
-    import trimesh
-    ico = trimesh.creation.icosphere(subdivisions=1)
-    V = torch.tensor(ico.vertices, dtype=D64) * 0.8
-    F = torch.tensor(ico.faces, dtype=torch.long)
-    # a big triangle through the camera plane, partly behind the camera
-    extra = torch.tensor([[-3.0, -2.0, 3.5], [3.0, -1.5, 3.5],
-                          [0.0, 2.5, -1.5]], dtype=D64)
-    V = torch.cat([V, extra])
-    F = torch.cat([F, torch.tensor([[len(V) - 3, len(V) - 2, len(V) - 1]])])
-    return V, F.t().contiguous()
-
-
-def brute_force_raster(V, F, K, E, height, width, near=1e-6):
-    """Moller-Trumbore of every pixel-centre ray with every triangle."""
-    cam = (V @ E[:, :3].T + E[:, 3]).numpy()
-    Kinv = np.linalg.inv(K.numpy())
-    jj, ii = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
-    d = np.stack([jj, ii, np.ones_like(jj)], -1) @ Kinv.T  # d_z = 1
-    best = np.full((height, width), np.inf)
-    fid = np.full((height, width), -1)
-    edge = np.full((height, width), np.inf)
-    for f, (a, b, c) in enumerate(F.t().numpy()):
-        A, B, C = cam[a], cam[b], cam[c]
-        e1, e2 = B - A, C - A
-        p = np.cross(d, e2)
-        det = p @ e1
-        with np.errstate(divide='ignore', invalid='ignore'):
-            u = (p * (-A)).sum(-1) / det
-            q = np.cross(-A, e1)
-            v = (q * d).sum(-1) / det
-            t = (q @ e2) / det
-        hit = (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= near)
-        closer = hit & (t < best)
-        best[closer] = t[closer]
-        fid[closer] = f
-        margin = np.minimum(np.minimum(u, v), 1 - u - v)
-        edge = np.where(hit, np.minimum(edge, np.abs(margin)), edge)
-    return fid, best, edge
-
-
-def test_rasterize_matches_ray_casting():
-    V, F = small_mesh()
-    K, E = camera([0.3, -2.2, 1.0])
-    face_id, bary, depth = rasterize(V, F, K, E, 40, 48)
-    ref, ref_depth, edge = brute_force_raster(V, F, K, E, 40, 48)
-    assert (ref >= 0).sum() > 200 and (ref == F.size(1) - 1).sum() > 20
-    differ = face_id.numpy() != ref
-    # only where the pixel centre is within 1e-6 of a triangle edge
-    assert np.all(edge[differ] < 1e-6)
-    same = ~differ & (ref >= 0)
-    np.testing.assert_allclose(depth.numpy()[same], ref_depth[same],
-                               rtol=1e-9)
-    # the barycentrics rebuild the hit point on the ray
-    cam = V @ E[:, :3].T + E[:, 3]
-    corners = F.t()[face_id.clamp_min(0)]
-    hit = (bary[..., None] * cam[corners]).sum(-2)
-    u = K[0, 0] * hit[..., 0] / hit[..., 2] + K[0, 2]
-    v = K[1, 1] * hit[..., 1] / hit[..., 2] + K[1, 2]
-    jj, ii = np.meshgrid(np.arange(48) + 0.5, np.arange(40) + 0.5)
-    covered = face_id.numpy() >= 0
-    np.testing.assert_allclose(u.numpy()[covered], jj[covered], atol=1e-8)
-    np.testing.assert_allclose(v.numpy()[covered], ii[covered], atol=1e-8)
-    assert np.all(np.isinf(depth.numpy()[~covered]))
-
-
-def test_rasterize_behind_camera_is_empty():
-    V, F = small_mesh()
-    K, E = camera([0.0, -3.0, 0.0], target=(0.0, -6.0, 0.0))
-    face_id, _, depth = rasterize(V[:-3], F[:, :-1], K, E, 20, 24)
-    assert bool((face_id == -1).all()) and bool(torch.isinf(depth).all())
-
-
-def test_point_visibility_two_layers():
-    # two parallel squares; the back one is hidden where the front one is
-    quad = torch.tensor([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0.0]],
-                        dtype=D64)
-    front = quad * torch.tensor([0.5, 0.5, 1], dtype=D64) \
-        + torch.tensor([0, 0, 1.0], dtype=D64)
-    V = torch.cat([quad, front])
-    F = torch.tensor([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]).t()
-    K, E = camera([0.0, 0.0, 5.0], focal=30.0, size=(32, 32))
-    pts = torch.tensor([[0.0, 0.1, 0.0], [0.9, 0.9, 0.0], [0.1, 0.2, 1.0],
-                        [0.0, 0.0, 9.0], [30.0, 0.0, 0.0]], dtype=D64)
-    vis = point_visibility(pts, V, F, K[None], E[None], 32, 32)[:, 0]
-    assert vis.tolist() == [False, True, True, False, False]
-    torch.testing.assert_close(camera_centers(E[None])[0],
-                               torch.tensor([0.0, 0.0, 5.0], dtype=D64))
 
 
 def test_render_images_background_and_bad_input():
@@ -355,10 +236,6 @@ def test_render_images_background_and_bad_input():
         bad = E.clone()
         bad[:, :3] *= 2
         render_images(V, F, n, bc, m, r, K[None], bad[None], 24, 24, env)
-    with pytest.raises(ValueError, match='faces|face'):
-        rasterize(V, F.t(), K, E, 24, 24)
-    with pytest.raises(ValueError, match='intrinsics'):
-        rasterize(V, F, K[:2], E, 24, 24)
 
 
 def test_kernel_smith_g1_is_the_appearance_packages():

@@ -1,7 +1,7 @@
 """Log maps and parallel transport (HSN precomputation) against analytic
 answers on spheres and planes, the gauge symmetry, transport round trips,
-patch-based against global vector heat solves, and bad input."""
-import importlib.util
+bad input and the disc-graph size estimate. The vector heat back end's own
+tests are in test_vector_heat.py."""
 import math
 
 import pytest
@@ -13,74 +13,16 @@ from hypothesis import strategies as st
 from tg_intrinsic.geometry import (estimate_normals, geodesic_neighbourhoods,
                                    log_map, lumped_mass, tangent_frames,
                                    vertex_area_weights, vertex_normals)
-from tg_intrinsic.geometry.geodesics import affine_heat as _affine_heat
-from tg_intrinsic.geometry.geodesics import vector_heat as _vector_heat
 
-from tests.conftest import grid_mesh, icosphere
-from tests.symmetry import rotate_frames
+from tests.conftest import fibonacci_sphere, grid_mesh, icosphere
+from tests.geometry.geodesics.surfaces import (angle_errors, arc,
+                                               bumpy_sphere, some_centres,
+                                               sphere_truth, wrap)
 from tests.geometry.test_bad_input import (SETTINGS, assert_valid, call,
                                            face_arrays, point_arrays)
-from tests.conftest import fibonacci_sphere
+from tests.symmetry import rotate_frames
 
-
-needs_pp3d = pytest.mark.skipif(
-    importlib.util.find_spec('potpourri3d') is None,
-    reason="method='vector_heat' on point clouds needs potpourri3d")
 METHODS = ['fast', 'vector_heat']
-
-
-def wrap(angle):
-    return torch.atan2(torch.sin(angle), torch.cos(angle))
-
-
-def arc(a, b):
-    """Angle between unit vectors, accurate also for tiny angles."""
-    return torch.atan2(torch.linalg.cross(a, b).norm(dim=-1),
-                       (a * b).sum(-1))
-
-
-def sphere_truth(pos, frame, edge_index):
-    """Analytic log map and transport on the unit sphere: the geodesic from
-    p_i to p_j lies in the plane through the origin, p_i and p_j; the
-    rotation about p_j x p_i by the angle between them maps T_j onto T_i."""
-    j, i = edge_index
-    p_i, p_j = pos[i], pos[j]
-    cos = (p_i * p_j).sum(-1).clamp(-1, 1)
-    r = arc(p_i, p_j)
-    d = p_j - cos.unsqueeze(-1) * p_i
-    theta = torch.atan2((d * frame[i, 1]).sum(-1), (d * frame[i, 0]).sum(-1))
-    axis = torch.linalg.cross(p_j, p_i)
-    sin = axis.norm(dim=-1, keepdim=True)
-    k = axis / sin.clamp_min(1e-300)
-    v = frame[j, 0]
-    c = cos.unsqueeze(-1)
-    moved = v * c + torch.linalg.cross(k, v) * sin \
-        + k * (k * v).sum(-1, keepdim=True) * (1 - c)
-    moved = torch.where(sin > 1e-12, moved, v)
-    phi = torch.atan2((moved * frame[i, 1]).sum(-1),
-                      (moved * frame[i, 0]).sum(-1))
-    return r, theta, phi
-
-
-def angle_errors(r, theta, phi, truth, edge_index):
-    r0, theta0, phi0 = truth
-    off = edge_index[0] != edge_index[1]
-    return ((r - r0).abs().max(), wrap(theta - theta0)[off].abs().max(),
-            wrap(phi - phi0).abs().max())
-
-
-def bumpy_sphere(subdivisions=3, amplitude=0.15):
-    """An icosphere with smooth radial bumps: curvature varies, so neither
-    method is exact and the comparisons mean something."""
-    pos, face = icosphere(subdivisions)
-    x, y, z = pos.unbind(-1)
-    bump = 1 + amplitude * torch.sin(3 * x) * torch.cos(2 * y + z)
-    return pos * bump.unsqueeze(-1), face
-
-
-def some_centres(num, count, seed=0):
-    g = torch.Generator().manual_seed(seed)
-    return torch.randperm(num, generator=g)[:count].sort().values
 
 
 # ----------------------------------------------------------------------------
@@ -233,46 +175,6 @@ def test_fast_and_vector_heat_agree_on_a_smooth_surface():
     assert (gaps[1] < gaps[0] / torch.tensor([1.8, 3.0, 3.0])).all()
 
 
-def test_vector_heat_on_sphere():
-    pos, face = icosphere(4)
-    eps = 0.4
-    edge_index, _ = geodesic_neighbourhoods(pos, eps, face=face,
-                                            centers=some_centres(2562, 300))
-    frame = tangent_frames(pos)
-    out = log_map(pos, edge_index, frame, face=face, method='vector_heat',
-                  workers=1)
-    r_err, t_err, p_err = angle_errors(
-        *out, sphere_truth(pos, frame, edge_index), edge_index)
-    assert r_err < 0.01 * eps
-    assert t_err < 5e-3 and p_err < 5e-3
-
-
-@needs_pp3d
-def test_vector_heat_on_point_cloud_sphere(monkeypatch):
-    monkeypatch.setattr(_vector_heat, 'PLAN', 'patches')
-    pos = fibonacci_sphere(3000)
-    eps = 0.4
-    edge_index, _ = geodesic_neighbourhoods(pos, eps, normal=pos,
-                                            centers=some_centres(3000, 60))
-    frame = tangent_frames(pos)
-    r, theta, phi = log_map(pos, edge_index, frame, method='vector_heat',
-                            workers=1)
-    whole = log_map(pos, edge_index, frame, method='vector_heat',
-                    margin=1e9, workers=1)
-    # Patches reproduce potpourri3d's point-cloud solver on the whole cloud.
-    assert ((r - whole[0]).abs() / eps).quantile(0.99) < 0.02
-    assert wrap(theta - whole[1]).abs().quantile(0.99) < 0.02
-    assert wrap(phi - whole[2]).abs().quantile(0.99) < 0.02
-    # That solver is much less accurate than the mesh one (its angles drift
-    # with the distance, and its normals are not consistently oriented);
-    # these bounds document it rather than a goal.
-    r0, theta0, phi0 = sphere_truth(pos, frame, edge_index)
-    off = edge_index[0] != edge_index[1]
-    assert (r - r0).abs().max() < 0.08 * eps
-    assert wrap(theta - theta0)[off].abs().median() < 0.05
-    assert wrap(phi - phi0).abs().median() < 5e-3
-
-
 @pytest.mark.parametrize('method', METHODS)
 def test_flat_plane_is_exact(method):
     pos, face = grid_mesh(30, jitter=0.3)
@@ -297,27 +199,6 @@ def test_flat_plane_is_exact(method):
     assert (r - d.norm(dim=-1)).abs().max() < tol * eps
     assert wrap(theta - angle)[off].abs().max() < tol
     assert phi.abs().max() < tol
-
-
-def test_vector_heat_at_the_boundary():
-    # Boundary vertices keep their true fan of triangles: on a flat square
-    # the log maps and transport from rim and corner vertices are exact (a
-    # 90 degree corner is not stretched to a half plane).
-    pos, face = grid_mesh(15, jitter=0.3)
-    frame = torch.eye(3, dtype=pos.dtype).expand(pos.size(0), 3, 3)
-    rim = torch.tensor([7, 7 * 15, 7 * 15 + 14, 14 * 15 + 7])
-    corners = torch.tensor([0, 14, 14 * 15, 14 * 15 + 14])
-    edge_index, _ = geodesic_neighbourhoods(pos, 0.2, face=face,
-                                            centers=torch.cat([rim, corners]))
-    r, theta, phi = log_map(pos, edge_index, frame, face=face,
-                            method='vector_heat', workers=1)
-    j, i = edge_index
-    d = pos[j] - pos[i]
-    off = i != j
-    err = wrap(theta - torch.atan2(d[:, 1], d[:, 0]))
-    assert err[off].abs().max() < 5e-4
-    assert phi.abs().max() < 5e-4
-    assert ((r - d.norm(dim=-1)).abs() / 0.2).max() < 5e-4
 
 
 # ----------------------------------------------------------------------------
@@ -375,105 +256,6 @@ def test_transport_round_trip(method):
         assert arrive.median() < 2e-2
 
 
-# ----------------------------------------------------------------------------
-# patches against the original global solve
-# ----------------------------------------------------------------------------
-def test_patches_match_global_vector_heat(monkeypatch):
-    pos, face = bumpy_sphere(3)
-    edge_index, _ = geodesic_neighbourhoods(pos, 0.5, face=face)
-    # On a mesh this small the planner would rather solve on the whole
-    # surface; force patches.
-    monkeypatch.setattr(_vector_heat, 'PLAN', 'patches')
-    local = log_map(pos, edge_index, face=face, method='vector_heat',
-                    workers=1)
-    # A huge margin makes every patch the whole surface: one factorisation
-    # and one solve per vertex on the full mesh, the original approach.
-    whole = log_map(pos, edge_index, face=face, method='vector_heat',
-                    margin=1e9, workers=1)
-    r_err = (local[0] - whole[0]).abs() / 0.5
-    t_err = wrap(local[1] - whole[1]).abs()
-    p_err = wrap(local[2] - whole[2]).abs()
-    for err in (r_err, t_err, p_err):
-        assert err.median() < 1e-3
-        assert err.quantile(0.99) < 1e-2
-
-
-def test_threads_give_the_same_answer(monkeypatch):
-    pos, face = icosphere(2)
-    edge_index, _ = geodesic_neighbourhoods(pos, 0.5, face=face)
-    monkeypatch.setattr(_vector_heat, 'PLAN', 'patches')
-    alone = log_map(pos, edge_index, face=face, method='vector_heat',
-                    workers=1)
-    # Small blocks of centres, so that both threads get some.
-    monkeypatch.setattr(_affine_heat, 'CENTRE_CHUNK', 16)
-    threaded = log_map(pos, edge_index, face=face, method='vector_heat',
-                       workers=2)
-    for a, b in zip(alone, threaded):
-        assert torch.equal(a, b)
-
-
-@needs_pp3d
-def test_worker_processes_give_the_same_answer(monkeypatch):
-    pos = fibonacci_sphere(1500)
-    edge_index, _ = geodesic_neighbourhoods(pos, 0.3, normal=pos,
-                                            centers=some_centres(1500, 40))
-    frame = tangent_frames(pos)
-    monkeypatch.setattr(_vector_heat, 'PLAN', 'patches')
-    alone = log_map(pos, edge_index, frame, method='vector_heat', workers=1)
-    monkeypatch.setattr(_vector_heat, 'POOL_WORK', 0)
-    pooled = log_map(pos, edge_index, frame, method='vector_heat',
-                     workers=2)
-    for a, b in zip(alone, pooled):
-        assert torch.equal(a, b)
-
-
-def test_several_components():
-    a = trimesh.creation.icosphere(2)
-    b = trimesh.creation.icosphere(2)
-    b.apply_translation([5, 0, 0])
-    mesh = trimesh.util.concatenate([a, b])
-    pos = torch.tensor(mesh.vertices)
-    face = torch.tensor(mesh.faces).t().contiguous()
-    edge_index, _ = geodesic_neighbourhoods(pos, 0.8, face=face)
-    r, theta, phi = log_map(pos, edge_index, face=face, method='vector_heat',
-                            workers=1)
-    for t in (r, theta, phi):
-        assert torch.isfinite(t).all()
-    half = torch.arange(pos.size(0)) < a.vertices.shape[0]
-    assert torch.equal(half[edge_index[0]], half[edge_index[1]])
-    # The two parts are the same sphere: the same distances.
-    m = half[edge_index[1]]
-    assert torch.allclose(r[m].sort().values, r[~m].sort().values,
-                          atol=1e-6)
-
-
-def test_far_neighbours_fall_back_to_the_whole_component(monkeypatch):
-    # A neighbour two radians from its centre: the patch around the two
-    # discs falls apart into two pieces, and the centre is redone on the
-    # whole surface, exactly as the global solve does it.
-    monkeypatch.setattr(_vector_heat, 'PLAN', 'patches')
-    redone = []
-    whole_jobs = _vector_heat.whole_jobs
-
-    def spy(label, rows, *args, **kwargs):
-        redone.append(rows.size)
-        return whole_jobs(label, rows, *args, **kwargs)
-
-    pos, face = icosphere(3)
-    edge_index, _ = geodesic_neighbourhoods(pos, 0.3, face=face)
-    far = int(((pos @ pos[0]) - math.cos(2.0)).abs().argmin())
-    extra = torch.cat([edge_index, torch.tensor([[far], [0]])], 1)
-    monkeypatch.setattr(_vector_heat, 'whole_jobs', spy)
-    local = log_map(pos, extra, face=face, method='vector_heat', margin=2.0,
-                    workers=1)
-    assert redone == [1]  # the centre of the far edge
-    whole = log_map(pos, extra, face=face, method='vector_heat', margin=1e9,
-                    workers=1)
-    for a, b in zip(local, whole):
-        assert torch.isfinite(a).all()
-        assert torch.allclose(a[-1], b[-1], atol=1e-12)
-    true = math.acos(float(pos[0] @ pos[far]))
-    assert abs(float(local[0][-1]) - true) < 0.02 * true
 
 
 # ----------------------------------------------------------------------------

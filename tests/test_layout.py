@@ -1,5 +1,6 @@
-"""The package layout: old module paths keep working, and no module reaches
-into another file's private names."""
+"""The package layout: old module paths keep working, no module reaches
+into another file's private names, and the tests mirror the package file by
+file."""
 import ast
 import importlib
 import os
@@ -12,6 +13,7 @@ from tg_intrinsic import geometry
 from tg_intrinsic.geometry import MOVED_MODULES
 
 PACKAGE = os.path.dirname(tg_intrinsic.__file__)
+TESTS = os.path.dirname(__file__)
 
 
 @pytest.mark.parametrize('old', sorted(k for k, v in MOVED_MODULES.items()
@@ -107,3 +109,19 @@ def test_no_private_name_is_imported_across_files():
                         found.append(f'{where} imports the private module '
                                      f'{target}')
     assert not found, '\n'.join(found)
+
+
+def test_every_public_module_has_its_test_module():
+    # tg_intrinsic/a/b.py is tested in tests/a/test_b.py
+    missing = []
+    for root, _, files in os.walk(PACKAGE):
+        for file in files:
+            if not file.endswith('.py') or file.startswith('_'):
+                continue
+            folder = os.path.relpath(root, PACKAGE)
+            test = os.path.normpath(os.path.join(TESTS, folder,
+                                                 f'test_{file}'))
+            if not os.path.isfile(test):
+                module = os.path.normpath(os.path.join(folder, file))
+                missing.append(f'{module}: {os.path.relpath(test, TESTS)}')
+    assert not missing, 'modules without tests:\n' + '\n'.join(missing)

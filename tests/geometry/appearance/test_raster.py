@@ -1,0 +1,103 @@
+"""The rasteriser against per-pixel ray casting in numpy, cameras that look
+away, point visibility between two layers, and bad input."""
+import numpy as np
+import pytest
+import torch
+
+from tg_intrinsic.geometry.appearance.cameras import camera_centers
+from tg_intrinsic.geometry.appearance.raster import (point_visibility,
+                                                     rasterize)
+
+from tests.geometry.appearance.scenes import D64, camera, small_mesh
+
+
+def brute_force_raster(V, F, K, E, height, width, near=1e-6):
+    """Moller-Trumbore of every pixel-centre ray with every triangle."""
+    cam = (V @ E[:, :3].T + E[:, 3]).numpy()
+    Kinv = np.linalg.inv(K.numpy())
+    jj, ii = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    d = np.stack([jj, ii, np.ones_like(jj)], -1) @ Kinv.T  # d_z = 1
+    best = np.full((height, width), np.inf)
+    fid = np.full((height, width), -1)
+    edge = np.full((height, width), np.inf)
+    for f, (a, b, c) in enumerate(F.t().numpy()):
+        A, B, C = cam[a], cam[b], cam[c]
+        e1, e2 = B - A, C - A
+        p = np.cross(d, e2)
+        det = p @ e1
+        with np.errstate(divide='ignore', invalid='ignore'):
+            u = (p * (-A)).sum(-1) / det
+            q = np.cross(-A, e1)
+            v = (q * d).sum(-1) / det
+            t = (q @ e2) / det
+        hit = (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= near)
+        closer = hit & (t < best)
+        best[closer] = t[closer]
+        fid[closer] = f
+        margin = np.minimum(np.minimum(u, v), 1 - u - v)
+        edge = np.where(hit, np.minimum(edge, np.abs(margin)), edge)
+    return fid, best, edge
+
+
+def test_rasterize_matches_ray_casting():
+    V, F = small_mesh()
+    K, E = camera([0.3, -2.2, 1.0])
+    face_id, bary, depth = rasterize(V, F, K, E, 40, 48)
+    ref, ref_depth, edge = brute_force_raster(V, F, K, E, 40, 48)
+    assert (ref >= 0).sum() > 200 and (ref == F.size(1) - 1).sum() > 20
+    differ = face_id.numpy() != ref
+    # only where the pixel centre is within 1e-6 of a triangle edge
+    assert np.all(edge[differ] < 1e-6)
+    same = ~differ & (ref >= 0)
+    np.testing.assert_allclose(depth.numpy()[same], ref_depth[same],
+                               rtol=1e-9)
+    # the barycentrics rebuild the hit point on the ray
+    cam = V @ E[:, :3].T + E[:, 3]
+    corners = F.t()[face_id.clamp_min(0)]
+    hit = (bary[..., None] * cam[corners]).sum(-2)
+    u = K[0, 0] * hit[..., 0] / hit[..., 2] + K[0, 2]
+    v = K[1, 1] * hit[..., 1] / hit[..., 2] + K[1, 2]
+    jj, ii = np.meshgrid(np.arange(48) + 0.5, np.arange(40) + 0.5)
+    covered = face_id.numpy() >= 0
+    np.testing.assert_allclose(u.numpy()[covered], jj[covered], atol=1e-8)
+    np.testing.assert_allclose(v.numpy()[covered], ii[covered], atol=1e-8)
+    assert np.all(np.isinf(depth.numpy()[~covered]))
+
+
+def test_rasterize_behind_camera_is_empty():
+    V, F = small_mesh()
+    K, E = camera([0.0, -3.0, 0.0], target=(0.0, -6.0, 0.0))
+    face_id, _, depth = rasterize(V[:-3], F[:, :-1], K, E, 20, 24)
+    assert bool((face_id == -1).all()) and bool(torch.isinf(depth).all())
+
+
+def test_point_visibility_two_layers():
+    # two parallel squares; the back one is hidden where the front one is
+    quad = torch.tensor([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0.0]],
+                        dtype=D64)
+    front = quad * torch.tensor([0.5, 0.5, 1], dtype=D64) \
+        + torch.tensor([0, 0, 1.0], dtype=D64)
+    V = torch.cat([quad, front])
+    F = torch.tensor([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]).t()
+    K, E = camera([0.0, 0.0, 5.0], focal=30.0, size=(32, 32))
+    pts = torch.tensor([[0.0, 0.1, 0.0], [0.9, 0.9, 0.0], [0.1, 0.2, 1.0],
+                        [0.0, 0.0, 9.0], [30.0, 0.0, 0.0]], dtype=D64)
+    vis = point_visibility(pts, V, F, K[None], E[None], 32, 32)[:, 0]
+    assert vis.tolist() == [False, True, True, False, False]
+    torch.testing.assert_close(camera_centers(E[None])[0],
+                               torch.tensor([0.0, 0.0, 5.0], dtype=D64))
+
+
+def test_bad_input():
+    V, F = small_mesh()
+    K, E = camera([0.3, -2.2, 1.0], size=(24, 24))
+    with pytest.raises(ValueError, match='face'):
+        rasterize(V, F.t(), K, E, 24, 24)
+    with pytest.raises(ValueError, match='intrinsics'):
+        rasterize(V, F, K[:2], E, 24, 24)
+    with pytest.raises(ValueError, match='extrinsics'):
+        bad = E.clone()
+        bad[:, :3] *= 2
+        rasterize(V, F, K, bad, 24, 24)
+    with pytest.raises(ValueError, match='points'):
+        point_visibility(V[:, :2], V, F, K[None], E[None], 24, 24)

@@ -142,15 +142,15 @@ class GravoMG:
         if not edge_index.is_floating_point():
             edge_index = edge_index.long()
         edge_index = check_edge_index(edge_index, pos.size(0), pos)
-        levels = gravo_hierarchy(pos.numpy(), edge_index.cpu().numpy(),
-                                 **hierarchy)
+        levels = gravo_hierarchy(pos, edge_index, **hierarchy)
         n = pos.size(0)
         out = []
         for level in levels:
+            m = level.sample.numel()
             out.append(sp.csr_matrix(
-                (level.prolong_weight, tuple(level.prolong_index)),
-                shape=(n, level.sample.size)))
-            n = level.sample.size
+                (level.prolong_weight.numpy(),
+                 tuple(level.prolong_index.numpy())), shape=(n, m)))
+            n = m
         return cls(out)
 
     @classmethod

@@ -1,4 +1,3 @@
-import torch
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
@@ -83,23 +82,17 @@ class GravoHierarchy(BaseTransform):
     def forward(self, data: Data) -> IntrinsicData:
         pos = check_points(data.pos)
         graph = surface_graph(data, self.k)
-        levels = gravo_hierarchy(
-            pos.detach().cpu().double().numpy(), graph.cpu().numpy(),
-            self.ratio, self.lower_bound, self.max_levels, self.shift,
-            self.weighting, self.voronoi)
+        levels = gravo_hierarchy(pos.detach(), graph, self.ratio,
+                                 self.lower_bound, self.max_levels,
+                                 self.shift, self.weighting, self.voronoi)
         data = IntrinsicData(**{k: v for k, v in data.to_dict().items()})
-
-        def tensor(array, like):
-            return torch.from_numpy(array).to(like.device)
-
         for level, step in enumerate(levels, start=1):
-            data[f'pos_{level}'] = tensor(step.pos, pos).to(pos.dtype)
-            data[f'edge_index_{level}'] = tensor(step.edge_index, graph)
-            data[f'sample_index_{level}'] = tensor(step.sample, graph)
-            data[f'cluster_{level}'] = tensor(step.cluster, graph)
-            data[f'prolong_index_{level}'] = tensor(step.prolong_index, graph)
-            data[f'prolong_weight_{level}'] = tensor(step.prolong_weight,
-                                                     pos).to(pos.dtype)
+            data[f'pos_{level}'] = step.pos
+            data[f'edge_index_{level}'] = step.edge_index
+            data[f'sample_index_{level}'] = step.sample
+            data[f'cluster_{level}'] = step.cluster
+            data[f'prolong_index_{level}'] = step.prolong_index
+            data[f'prolong_weight_{level}'] = step.prolong_weight
         return data
 
     def __repr__(self) -> str:

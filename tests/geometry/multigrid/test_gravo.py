@@ -7,12 +7,15 @@ import itertools
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import torch
 import trimesh
 from scipy.sparse.csgraph import dijkstra
 
-from tg_intrinsic.geometry.multigrid.gravo import (_closest_on_triangle, _csr,
-                                         _triangles, gravo_hierarchy,
-                                         gravo_level)
+from tg_intrinsic.geometry.multigrid.gravo import (GravoLevel,
+                                                   _closest_on_triangle, _csr,
+                                                   _triangles,
+                                                   gravo_hierarchy,
+                                                   gravo_level)
 
 from tests.conftest import grid_mesh
 
@@ -32,6 +35,14 @@ def knn_edges(points, k=8):
     _, nbr = cKDTree(points).query(points, k=k + 1)
     return np.stack([nbr[:, 1:].reshape(-1),
                      np.repeat(np.arange(points.shape[0]), k)])
+
+
+def numpy_level(level):
+    return GravoLevel(*(value.numpy() for value in level))
+
+
+def numpy_levels(levels):
+    return [numpy_level(level) for level in levels]
 
 
 def check_prolongation(level, num_fine):
@@ -62,7 +73,7 @@ def test_prolongation_rows_are_partitions_of_unity(case):
         pos, face = sphere(4)
         pos = np.concatenate([pos, pos + 3.0])
         edges = face_edges(np.concatenate([face, face + pos.shape[0] // 2]))
-    levels = gravo_hierarchy(pos, edges, lower_bound=100)
+    levels = numpy_levels(gravo_hierarchy(pos, edges, lower_bound=100))
     assert len(levels) >= 1
     num = pos.shape[0]
     for level in levels:
@@ -86,7 +97,7 @@ def test_sampling_sweep_keeps_samples_apart():
     # earlier sample along one or two edges (r = 2 x mean edge for ratio 8).
     pos, face = sphere(4)
     edges = face_edges(face)
-    level = gravo_level(pos, edges, ratio=8.0)
+    level = numpy_level(gravo_level(pos, edges, ratio=8.0))
     n = pos.shape[0]
     indptr, indices = _csr(edges, n)
     length = lambda a, b: np.linalg.norm(pos[a] - pos[b])  # noqa: E731
@@ -116,8 +127,8 @@ def test_sweep_cells_are_a_partial_correction_of_the_exact_ones():
     pos = rng.normal(size=(6000, 3))
     pos /= np.linalg.norm(pos, axis=1, keepdims=True)
     edges = knn_edges(pos)
-    exact = gravo_level(pos, edges, voronoi='exact')
-    sweep = gravo_level(pos, edges, voronoi='sweep')
+    exact = numpy_level(gravo_level(pos, edges, voronoi='exact'))
+    sweep = numpy_level(gravo_level(pos, edges, voronoi='sweep'))
     assert np.array_equal(exact.sample, sweep.sample)
     differ = np.mean(exact.cluster != sweep.cluster)
     assert 0 < differ < 0.01
@@ -172,7 +183,7 @@ def test_linear_functions_are_interpolated_exactly_on_a_plane():
     # everywhere away from the rim.
     p, f = grid_mesh(70, jitter=0.3, seed=1)
     pos, edges = p.numpy(), face_edges(f.t().numpy())
-    level = gravo_level(pos, edges, ratio=8.0, shift=False)
+    level = numpy_level(gravo_level(pos, edges, ratio=8.0, shift=False))
     linear = lambda x: 0.3 + 2.0 * x[:, 0] - 1.5 * x[:, 1]  # noqa: E731
     rows, cols = level.prolong_index
     P = sp.csr_matrix((level.prolong_weight, (rows, cols)),
@@ -181,8 +192,8 @@ def test_linear_functions_are_interpolated_exactly_on_a_plane():
     interior = ((pos[:, :2] > 0.1) & (pos[:, :2] < 0.9)).all(1)
     assert np.mean(err[interior] < 1e-12) > 0.95
     # Inverse distance weights are smooth but not exact.
-    idw = gravo_level(pos, edges, ratio=8.0, shift=False,
-                      weighting='inverse_distance')
+    idw = numpy_level(gravo_level(pos, edges, ratio=8.0, shift=False,
+                                  weighting='inverse_distance'))
     rows, cols = idw.prolong_index
     P = sp.csr_matrix((idw.prolong_weight, (rows, cols)),
                       shape=(pos.shape[0], idw.sample.size))
@@ -213,7 +224,8 @@ def test_isolated_points_stay_their_own_coarse_point():
     # kept as its own coarse point on every level (weight 1).
     pos, face = sphere(4)
     pos = np.concatenate([pos, [[5.0, 5.0, 5.0]]])
-    levels = gravo_hierarchy(pos, face_edges(face), lower_bound=30)
+    levels = numpy_levels(gravo_hierarchy(pos, face_edges(face),
+                                          lower_bound=30))
     assert len(levels) == 2
     num = pos.shape[0]
     for level in levels:
@@ -223,3 +235,22 @@ def test_isolated_points_stay_their_own_coarse_point():
         rows, cols = level.prolong_index
         assert level.prolong_weight[rows == num - 1].tolist() == [1.0]
         num = level.sample.size
+
+
+def test_tensors_in_tensors_out():
+    pos, face = sphere(4)
+    edges = torch.from_numpy(face_edges(face))
+    for dtype in (torch.float32, torch.float64):
+        levels = gravo_hierarchy(torch.from_numpy(pos).to(dtype), edges,
+                                 lower_bound=30)
+        assert len(levels) == 2
+        for level in levels:
+            assert level.pos.dtype == level.prolong_weight.dtype == dtype
+            for index in (level.sample, level.cluster, level.edge_index,
+                          level.prolong_index):
+                assert index.dtype == torch.long
+    # the same hierarchy from numpy arrays and from float64 tensors
+    ref = gravo_hierarchy(pos, face_edges(face), lower_bound=30)
+    for a, b in zip(ref, levels):
+        for x, y in zip(a, b):
+            assert torch.equal(x, y)

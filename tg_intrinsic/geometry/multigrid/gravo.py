@@ -1,7 +1,8 @@
 r"""Graph-Voronoi multigrid hierarchies (Gravo MG; Wiersma, Nasikun,
 Eisemann and Hildebrandt, SIGGRAPH 2023): sampling, Voronoi cells, coarse
-graphs and the prolongation operators, on any neighbour graph. Pure numpy
-and numba; :class:`tg_intrinsic.transforms.GravoHierarchy` wraps it for
+graphs and the prolongation operators, on any neighbour graph. Tensors in
+and out, numpy and numba inside;
+:class:`tg_intrinsic.transforms.GravoHierarchy` wraps it for
 :class:`~torch_geometric.data.Data`."""
 import math
 from typing import List, NamedTuple
@@ -9,6 +10,7 @@ from typing import List, NamedTuple
 import numpy as np
 import torch
 from numba import njit, prange
+from torch import Tensor
 
 from ..checks import check_choice, check_edge_index, check_points
 from .voronoi import dijkstra_from
@@ -22,13 +24,15 @@ class GravoLevel(NamedTuple):
     ``cluster`` (the coarse point whose Voronoi cell holds every fine
     point), the coarse ``pos`` and ``edge_index`` (both directions), and the
     prolongation ``P`` as ``prolong_index`` (2, nnz: fine row, coarse
-    column) and ``prolong_weight`` (nnz)."""
-    sample: np.ndarray
-    cluster: np.ndarray
-    pos: np.ndarray
-    edge_index: np.ndarray
-    prolong_index: np.ndarray
-    prolong_weight: np.ndarray
+    column) and ``prolong_weight`` (nnz). Indices are ``torch.long``;
+    ``pos`` and ``prolong_weight`` have the input's float dtype; all on the
+    input's device."""
+    sample: Tensor
+    cluster: Tensor
+    pos: Tensor
+    edge_index: Tensor
+    prolong_index: Tensor
+    prolong_weight: Tensor
 
 
 def _csr(edge_index: np.ndarray, n: int):
@@ -329,7 +333,7 @@ def _compact(cols, vals):  # pragma: no cover (numba)
     return index, weight
 
 
-def gravo_level(pos: np.ndarray, edge_index: np.ndarray, ratio: float = 8.0,
+def gravo_level(pos: Tensor, edge_index: Tensor, ratio: float = 8.0,
                 shift: bool = True, weighting: str = 'barycentric',
                 voronoi: str = 'exact') -> GravoLevel:
     r"""One Gravo MG coarsening step of the points ``pos`` (N, 3) with the
@@ -353,9 +357,10 @@ def gravo_level(pos: np.ndarray, edge_index: np.ndarray, ratio: float = 8.0,
     point and its coarse neighbours, so rows are non-negative, sum to 1 and
     have at most 3 non-zeros."""
     check_options(ratio, weighting, voronoi)
-    pos, edge_index = _check_graph(pos, edge_index)
-    return _coarsen(pos, *_csr(edge_index, pos.shape[0]), ratio, shift,
-                    weighting, voronoi)[0]
+    like, pos, edge_index = _check_graph(pos, edge_index)
+    level = _coarsen(pos, *_csr(edge_index, pos.shape[0]), ratio, shift,
+                     weighting, voronoi)[0]
+    return _as_tensors(level, like)
 
 
 def check_options(ratio, weighting: str, voronoi: str):
@@ -370,14 +375,27 @@ def check_options(ratio, weighting: str, voronoi: str):
 
 def _check_graph(pos, edge_index):
     """Points ``(N, 3)`` and a graph ``(2, E)`` (tensors or arrays) checked
-    by the shared checks; returned as float64 / int64 numpy."""
+    by the shared checks; returns the checked points and both as float64 /
+    int64 numpy."""
     pos = check_points(torch.as_tensor(pos), 'pos')
     edge_index = torch.as_tensor(edge_index)
     if not edge_index.is_floating_point():
         edge_index = edge_index.long()
     edge_index = check_edge_index(edge_index, pos.size(0), pos)
-    return (np.ascontiguousarray(pos.detach().double().cpu().numpy()),
+    return (pos, np.ascontiguousarray(pos.detach().double().cpu().numpy()),
             np.ascontiguousarray(edge_index.cpu().numpy()))
+
+
+def _as_tensors(level: GravoLevel, like: Tensor) -> GravoLevel:
+    """A level of numpy arrays as tensors on ``like``'s device, positions
+    and weights in its dtype."""
+    def tensor(array, float_like=False):
+        out = torch.from_numpy(np.ascontiguousarray(array))
+        return out.to(like.device, like.dtype if float_like else None)
+    return GravoLevel(tensor(level.sample), tensor(level.cluster),
+                      tensor(level.pos, True), tensor(level.edge_index),
+                      tensor(level.prolong_index),
+                      tensor(level.prolong_weight, True))
 
 
 def _coarsen(pos, indptr, indices, ratio, shift, weighting, voronoi):
@@ -416,7 +434,7 @@ def _coarsen(pos, indptr, indices, ratio, shift, weighting, voronoi):
                       weight), c_ptr, c_nbr
 
 
-def gravo_hierarchy(pos: np.ndarray, edge_index: np.ndarray,
+def gravo_hierarchy(pos: Tensor, edge_index: Tensor,
                     ratio: float = 8.0, lower_bound: int = 1000,
                     max_levels: int = 10, shift: bool = True,
                     weighting: str = 'barycentric', voronoi: str = 'exact'
@@ -426,7 +444,7 @@ def gravo_hierarchy(pos: np.ndarray, edge_index: np.ndarray,
     that keeps every point (all points coincide, so no sample covers
     another) ends the hierarchy: it would repeat forever."""
     check_options(ratio, weighting, voronoi)
-    pos, edge_index = _check_graph(pos, edge_index)
+    like, pos, edge_index = _check_graph(pos, edge_index)
     graph = _csr(edge_index, pos.shape[0])
     levels = []
     while len(levels) < max_levels and pos.shape[0] > lower_bound:
@@ -437,4 +455,4 @@ def gravo_hierarchy(pos: np.ndarray, edge_index: np.ndarray,
             break
         levels.append(level)
         pos = level.pos
-    return levels
+    return [_as_tensors(level, like) for level in levels]

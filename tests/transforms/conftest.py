@@ -22,6 +22,14 @@ def angle_gap(a, b):
                   - math.pi).abs().max())
 
 
+def edge_order(edge_index):
+    """The permutation that sorts edges ``(j -> i)`` by centre, then
+    neighbour: compares graphs whose equidistant neighbours may come in
+    another order."""
+    j, i = edge_index
+    return torch.argsort(i * (int(edge_index.max()) + 1) + j)
+
+
 def sphere_data(subdivisions=3):
     """A bumpy sphere (no symmetric ties between distances)."""
     pos, face = icosphere(subdivisions)

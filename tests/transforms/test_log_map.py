@@ -176,11 +176,17 @@ def test_max_neighbors_keeps_the_nearest_of_every_disc():
     n = data.num_nodes
     count = torch.bincount(capped.edge_index[1], minlength=n)
     assert (count == 5).all()
-    for centre in range(0, n, 17):
-        r_all = full.logmap[full.edge_index[1] == centre, 0]
-        r_kept = capped.logmap[capped.edge_index[1] == centre, 0]
-        assert torch.allclose(torch.sort(r_kept).values,
-                              torch.sort(r_all).values[:5])
+    assert full.edge_index.size(1) > 2 * capped.edge_index.size(1)
+    # the nearest by fast marching, which r of the log map matches to
+    # about 1e-3
+    for centre in range(n):
+        kept = capped.edge_index[0, capped.edge_index[1] == centre]
+        disc = full.edge_index[1] == centre
+        r = full.logmap[disc, 0]
+        chosen = torch.isin(full.edge_index[0, disc], kept)
+        assert int(chosen.sum()) == 5
+        if not chosen.all():
+            assert r[chosen].max() <= r[~chosen].min() + 0.005
 
 
 def test_memory_limit_says_what_fits_and_the_advice_works():

@@ -7,6 +7,9 @@ from torch_geometric.data import Data
 from tg_intrinsic.geometry import face_areas, is_closed_manifold
 from tg_intrinsic.transforms import CleanMesh
 from tests.conftest import icosphere
+from tests.transforms.conftest import (assert_hsn_inputs,
+                                       assert_point_cloud_operators, hsn,
+                                       sphere_pos_face)
 
 
 def sphere(subdivisions=2):
@@ -128,3 +131,40 @@ def test_bad_input_says_what_to_do():
 def test_repr():
     assert repr(CleanMesh()) == \
         'CleanMesh(weld_tolerance=0.0, largest_component=False)'
+
+
+# Real-mesh conditions, end to end: CleanMesh makes each one run through the
+# Harmonic Surface Network precomputation (and, sampled as a point cloud,
+# through DeltaNet's operators), or it fails with a ValueError naming it.
+def test_several_components():
+    (p1, f1), (p2, f2) = sphere_pos_face(), sphere_pos_face(2, 0.5, 3.0)
+    data = Data(pos=torch.cat([p1, p2]),
+                face=torch.cat([f1, f2 + p1.size(0)], 1))
+    out = hsn(CleanMesh()(data))  # every component kept
+    assert_hsn_inputs(out, data.num_nodes)
+    part = (torch.arange(data.num_nodes) >= p1.size(0)).long()
+    assert torch.equal(part[out.edge_index[0]], part[out.edge_index[1]])
+    assert_hsn_inputs(hsn(CleanMesh(largest_component=True)(data)),
+                      p1.size(0))
+    assert_point_cloud_operators(data)
+
+
+def test_unreferenced_vertices():
+    pos, face = sphere_pos_face()
+    stray = torch.tensor([[3.0, 0, 0], [0, 3.0, 0]], dtype=pos.dtype)
+    data = Data(pos=torch.cat([pos, stray]), face=face)
+    with pytest.raises(ValueError, match='not referenced'):
+        hsn(data)
+    assert_hsn_inputs(hsn(CleanMesh()(data)), pos.size(0))
+    assert_point_cloud_operators(data)
+
+
+def test_duplicate_vertices_of_a_triangle_soup():
+    pos, face = sphere_pos_face()
+    corners = face.t().reshape(-1)
+    soup = Data(pos=pos[corners],
+                face=torch.arange(corners.numel()).view(-1, 3).t())
+    with pytest.raises(ValueError, match='CleanMesh'):
+        hsn(soup)
+    assert_hsn_inputs(hsn(CleanMesh()(soup)), pos.size(0))
+    assert_point_cloud_operators(soup)

@@ -5,11 +5,16 @@ import numpy as np
 import pytest
 import torch
 from torch_geometric.data import Data
+from torch_geometric.transforms import Compose
 
 from tg_intrinsic.geometry import (edge_face_counts, face_areas, fps,
                                    is_closed_manifold)
-from tg_intrinsic.transforms import FarthestPointResample
+from tg_intrinsic.io.mesh import read_mesh
+from tg_intrinsic.transforms import CleanMesh, FarthestPointResample
 from tests.conftest import icosphere
+from tests.transforms.conftest import (assert_hsn_inputs,
+                                       assert_point_cloud_operators, hsn,
+                                       sphere_pos_face)
 
 
 def sphere(subdivisions=5):
@@ -118,3 +123,35 @@ def test_exact_count_is_a_no_op_and_bad_input_says_what_to_do():
 def test_repr():
     assert repr(FarthestPointResample(1024)) == \
         'FarthestPointResample(num_vertices=1024, refine=4.0)'
+
+
+# Real meshes with too few vertices for the HSN precomputation: resampled,
+# they run through it (and, as point clouds, through DeltaNet's operators).
+def test_quads_and_a_pentagon_from_an_obj_file(tmp_path):
+    # a pentagonal prism: two pentagons and five quads
+    angle = np.linspace(0, 2 * np.pi, 6)[:-1]
+    ring = np.stack([np.cos(angle), np.sin(angle), np.ones(5)], 1)
+    lines = [f'v {x} {y} {z}' for x, y, z in
+             np.concatenate([ring * [1, 1, -1], ring])]
+    lines += ['f 5 4 3 2 1', 'f 6 7 8 9 10']
+    lines += [f'f {k + 1} {(k + 1) % 5 + 1} {(k + 1) % 5 + 6} {k + 6}'
+              for k in range(5)]
+    path = tmp_path / 'prism.obj'
+    path.write_text('\n'.join(lines) + '\n')
+    pos, face = read_mesh(str(path))  # polygons come back as fans
+    assert face.shape == (2 * 3 + 5 * 2, 3)
+    data = Data(pos=torch.from_numpy(pos), face=torch.from_numpy(face).t())
+    with pytest.raises(ValueError, match='FarthestPointResample'):
+        hsn(data)  # ten vertices: every disc would hold only its centre
+    out = hsn(Compose([CleanMesh(), FarthestPointResample(300)])(data))
+    assert_hsn_inputs(out, 300)
+    assert_point_cloud_operators(data)
+
+
+def test_fewer_vertices_than_requested_points():
+    pos, face = sphere_pos_face(1)  # 42 vertices
+    data = Data(pos=pos, face=face, y=(pos[:, 2] > 0).long())
+    resampled = FarthestPointResample(1024)(data)
+    assert resampled.y.shape == (1024,)
+    assert_hsn_inputs(hsn(resampled), 1024)
+    assert_point_cloud_operators(data, num_points=1024)

@@ -2,7 +2,7 @@ import pytest
 import torch
 from torch_geometric.data import Data
 
-from tg_intrinsic.transforms import RandomAxisScale, RandomTranslation
+from tg_intrinsic.transforms import RandomAxisScale
 
 
 def test_normals_stay_normal_to_the_stretched_surface():
@@ -30,24 +30,10 @@ def test_normals_stay_normal_to_the_stretched_surface():
     assert 'grad_weight' in data   # the input is not mutated
 
 
-def test_translation_moves_the_whole_shape():
-    torch.manual_seed(1)
-    data = Data(pos=torch.randn(20, 3), normal=torch.randn(20, 3),
-                grad_weight=torch.ones(3, 2))
-    out = RandomTranslation(0.1)(data)
-    offset = out.pos - data.pos
-    assert torch.allclose(offset, offset[:1].expand(20, 3))
-    assert offset.abs().max() <= 0.1
-    assert torch.equal(out.normal, data.normal) and 'grad_weight' in out
-
-
 def test_bad_input():
     with pytest.raises(ValueError, match='0 < low <= high'):
         RandomAxisScale((1.2, 0.8))
-    with pytest.raises(ValueError, match='must not be negative'):
-        RandomTranslation(-1.0)
     with pytest.raises(ValueError, match="needs 'data.pos'"):
         RandomAxisScale((0.9, 1.1))(Data(x=torch.zeros(3, 1)))
     assert repr(RandomAxisScale((0.8, 1.25))) == \
         'RandomAxisScale(scales=(0.8, 1.25))'
-    assert repr(RandomTranslation(0.1)) == 'RandomTranslation(max_offset=0.1)'

@@ -5,6 +5,7 @@ from torch_geometric.data import Data
 
 from tg_intrinsic.transforms import MLSOperators, RandomRotation
 from tg_intrinsic.transforms.random_rotation import random_rotation_matrix
+from tests.transforms.conftest import angle_gap, apply, pipeline, sphere_data
 
 
 @pytest.mark.parametrize('axis', [None, 'x', 'y', 'z'])
@@ -95,3 +96,29 @@ def test_euler_rotations_stay_within_the_angle():
         single = random_rotation_matrix('z', generator, max_angle=10.0)
         assert single[2, 2] == 1 and abs(torch.atan2(
             single[1, 0], single[0, 0])) <= math.radians(10) + 1e-12
+
+
+def test_rotation_augmentation_keeps_precomputation_valid():
+    data = apply(sphere_data(2), pipeline())
+    torch.manual_seed(0)
+    rotated = RandomRotation()(data)
+    rebuilt = apply(Data(pos=rotated.pos, face=data.face, x=data.x,
+                         frame=rotated.frame), pipeline())
+    # equal up to the order of equidistant neighbours
+    for level in ('', '_1'):
+        orders = []
+        for d in (rebuilt, rotated):
+            j, i = d['edge_index' + level]
+            orders.append(torch.argsort(i * 10 ** 6 + j))
+        a, b = orders
+        assert torch.equal(rebuilt['edge_index' + level][:, a],
+                           rotated['edge_index' + level][:, b])
+        assert torch.allclose(rebuilt['logmap' + level][a, 0],
+                              rotated['logmap' + level][b, 0], atol=1e-9)
+        assert angle_gap(rebuilt['logmap' + level][a, 1],
+                         rotated['logmap' + level][b, 1]) < 1e-9
+        assert angle_gap(rebuilt['transport' + level][a],
+                         rotated['transport' + level][b]) < 1e-9
+    assert angle_gap(rebuilt.pool_transport_1, rotated.pool_transport_1
+                     ) < 1e-9
+    assert torch.allclose(rotated.pos_1, rotated.pos[data.sample_index_1])

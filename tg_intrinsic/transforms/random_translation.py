@@ -1,7 +1,15 @@
+import math
+import re
+
 import torch
+from torch import Tensor
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
+
+from tg_intrinsic.geometry.checks import check_points
+
+_LEVEL_POS = re.compile(r'pos_[1-9][0-9]*')
 
 
 @functional_transform('random_translation')
@@ -10,32 +18,39 @@ class RandomTranslation(BaseTransform):
     :obj:`random_translation`), uniform in a cube; unlike PyG's
     :class:`~torch_geometric.transforms.RandomJitter`, which moves every
     point on its own, the shape and everything intrinsic to it (normals,
-    frames, operators) stay as they are:
+    frames, operators) stay as they are; the points of coarser levels
+    (``pos_1``, ``pos_2``, ... of :class:`MultiscaleSupports` or
+    :class:`GravoHierarchy`) move with it:
 
     .. math::
         \mathbf{p}_i \mapsto \mathbf{p}_i + \mathbf{t}, \qquad
         \mathbf{t} \sim \mathcal{U}([-t_{\max}, t_{\max}]^3).
 
     Args:
-        max_offset (float): :math:`t_{\max}`, not negative.
+        max_offset (float): :math:`t_{\max}`, finite and not negative.
 
     Shapes:
         - **input:** ``pos`` :math:`(N, 3)`
         - **output:** ``pos`` :math:`(N, 3)`
     """
     def __init__(self, max_offset: float):
-        if not max_offset >= 0:
-            raise ValueError(f"max_offset must not be negative, got "
-                             f"{max_offset}")
+        if not (max_offset >= 0 and math.isfinite(max_offset)):
+            raise ValueError(f"max_offset must be finite and must not be "
+                             f"negative, got {max_offset}")
         self.max_offset = float(max_offset)
 
     def forward(self, data: Data) -> Data:
         if getattr(data, 'pos', None) is None:
             raise ValueError("RandomTranslation needs 'data.pos'")
+        pos = check_points(data.pos, 'data.pos', dim=None)
         data = data.clone()
-        offset = torch.empty(data.pos.size(-1), dtype=data.pos.dtype)
+        offset = torch.empty(pos.size(-1), dtype=pos.dtype)
         offset.uniform_(-self.max_offset, self.max_offset)
-        data.pos = data.pos + offset.to(data.pos.device)
+        offset = offset.to(pos.device)
+        for key, value in data.to_dict().items():
+            if key == 'pos' or (_LEVEL_POS.fullmatch(key)
+                                and isinstance(value, Tensor)):
+                data[key] = value + offset.to(value.dtype)
         return data
 
     def __repr__(self) -> str:

@@ -101,7 +101,7 @@ def test_bad_input():
     with pytest.raises(ValueError, match="needs 'data.pos'"):
         EstimateNormals()(Data(x=pos))
     with pytest.raises(ValueError, match="'k' must be at least 2"):
-        EstimateNormals(k=1)(Data(pos=pos))
+        EstimateNormals(k=1)
     with pytest.raises(ValueError, match='NaN'):
         EstimateNormals()(Data(pos=torch.full((20, 3), float('nan'))))
     with pytest.raises(ValueError, match="'data.normal' has 19 rows"):

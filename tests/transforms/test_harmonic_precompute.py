@@ -180,10 +180,13 @@ def test_float32_gives_complex64():
 
 def test_bad_values_are_named():
     data = LogMap(0.3)(sphere_data(2))
+    # checked when the transform is built
     with pytest.raises(ValueError, match="'rings' must be at least 1"):
-        HarmonicPrecompute(rings=0)(data)
+        HarmonicPrecompute(rings=0)
     with pytest.raises(ValueError, match="'max_order' must be at least 0"):
-        HarmonicPrecompute(max_order=-1)(data)
+        HarmonicPrecompute(max_order=-1)
+    with pytest.raises(ValueError, match="'levels' must be an integer"):
+        HarmonicPrecompute(levels=1.5)
     broken = data.clone()
     broken.area = -broken.area
     with pytest.raises(ValueError, match='non-negative'):

@@ -63,7 +63,7 @@ def test_bad_input():
     with pytest.raises(ValueError, match="'method' must be one of"):
         LogMap(0.2, method='exact')
     assert repr(LogMap(0.2)) == \
-        "LogMap(radius=0.2, method='fast', max_neighbors=None)"
+        "LogMap(radius=0.2, method='fast', max_neighbors=None, transport=True)"
 
 
 def test_a_non_manifold_edge():
@@ -203,16 +203,16 @@ def test_memory_limit_says_what_fits_and_the_advice_works():
 
 def test_bad_values_are_named():
     pos, face = icosphere(1)
-    data = Data(pos=pos, face=face)
+    # checked when the transform is built, not when it first runs
     for radius in (0.0, -0.1):
-        with pytest.raises(ValueError, match="'eps' must be positive"):
-            LogMap(radius)(data)
-    with pytest.raises(ValueError, match="'eps' must be finite"):
-        LogMap(float('nan'))(data)
+        with pytest.raises(ValueError, match="'radius' must be positive"):
+            LogMap(radius)
+    with pytest.raises(ValueError, match="'radius' must be finite"):
+        LogMap(float('nan'))
     with pytest.raises(ValueError, match="'max_memory' must be a positive"):
         LogMap(0.2, max_memory=0)
     with pytest.raises(ValueError, match="'max_neighbors' must be at least"):
-        LogMap(0.5, max_neighbors=0)(data)
+        LogMap(0.5, max_neighbors=0)
     with pytest.raises(ValueError, match="'data.pos'"):
         LogMap(0.5)(Data(x=pos))
     with pytest.raises(ValueError, match='right-handed'):
@@ -221,4 +221,5 @@ def test_bad_values_are_named():
     assert repr(LogMap(0.3, method='vector_heat', max_neighbors=8,
                        max_memory=1e6)) == (
         "LogMap(radius=0.3, method='vector_heat', max_neighbors=8, "
-        "max_memory=1000000.0)")
+        "transport=True, max_memory=1000000.0)")
+    assert 'transport=False' in repr(LogMap(0.3, transport=False))

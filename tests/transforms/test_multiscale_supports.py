@@ -158,4 +158,8 @@ def test_bad_values_are_named():
     assert repr(MultiscaleSupports([0.25, 0.0625], [0.4, 0.8],
                                    method='vector_heat')) == (
         "MultiscaleSupports(ratios=[0.25, 0.0625], radii=[0.4, 0.8], "
-        "method='vector_heat')")
+        "method='vector_heat', level0_radius=None, max_neighbors=None)")
+    with pytest.raises(ValueError, match="'level0_radius' must be positive"):
+        MultiscaleSupports([0.25], [0.4], level0_radius=0)
+    with pytest.raises(ValueError, match="'max_neighbors' must be at least"):
+        MultiscaleSupports([0.25], [0.4], max_neighbors=0)

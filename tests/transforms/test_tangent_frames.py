@@ -93,5 +93,5 @@ def test_bad_input():
     with pytest.raises(ValueError, match="'data.pos'"):
         TangentFrames()(Data(x=pos))
     with pytest.raises(ValueError, match="'k' must be at least 2"):
-        TangentFrames(k=1)(Data(pos=pos))
+        TangentFrames(k=1)
     assert repr(TangentFrames()) == 'TangentFrames(k=10)'

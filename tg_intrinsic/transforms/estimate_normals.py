@@ -2,6 +2,7 @@ from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
+from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.surface_attributes import (computed_normals,
                                              resolve_normals)
 
@@ -26,7 +27,7 @@ class EstimateNormals(BaseTransform):
             (default: :obj:`False`)
     """
     def __init__(self, k: int = 10, overwrite: bool = False):
-        self.k = k
+        self.k = check_positive_int(k, 'k', minimum=2)
         self.overwrite = overwrite
 
     def forward(self, data: Data) -> Data:

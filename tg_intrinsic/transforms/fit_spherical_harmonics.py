@@ -35,7 +35,8 @@ class FitSphericalHarmonics(BaseTransform):
     where the regulariser :math:`\lambda > 0` keeps points with fewer
     samples than coefficients solvable (a point seen by no view gets zero
     outgoing coefficients). The environment is first band-limited by a
-    spherical Gaussian of width :math:`\alpha' = V^{-1/2}` (:math:`V` views),
+    spherical Gaussian of width :math:`\alpha' = \max(V^{-1/2}, 1/l^*)`
+    (:math:`V` views),
     so that the light holds no frequencies the sparse views cannot resolve;
     the lobe model undoes it with :math:`e^{-(\alpha^2 - \alpha'^2)l^2}`.
 
@@ -55,10 +56,10 @@ class FitSphericalHarmonics(BaseTransform):
     Args:
         l_max (int, optional): Highest degree :math:`l^*`. (default: :obj:`5`)
         regularizer (float, optional): :math:`\lambda`. (default: :obj:`1e-4`)
-        num_light_samples (int, optional): Light samples per point; by
-            default :math:`4 (l^* + 1)^2`. (default: :obj:`None`)
+        num_light_samples (int, optional): Light samples per point, at
+            least :math:`4 (l^* + 1)^2`. (default: :obj:`1024`)
         prefilter_alpha (float, optional): :math:`\alpha'`; by default
-            :math:`V^{-1/2}`; 0 switches the band limit off.
+            :math:`\max(V^{-1/2}, 1/l^*)`; 0 switches the band limit off.
             (default: :obj:`None`)
 
     Shapes:

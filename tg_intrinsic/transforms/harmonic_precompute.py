@@ -4,6 +4,7 @@ from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
+from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.geometry.geodesics.harmonic import harmonic_terms
 
 
@@ -39,9 +40,11 @@ class HarmonicPrecompute(BaseTransform):
     """
     def __init__(self, rings: int = 6, max_order: int = 1,
                  levels: Optional[int] = None):
-        self.rings = rings
-        self.max_order = max_order
-        self.levels = levels
+        self.rings = check_positive_int(rings, 'rings')
+        self.max_order = check_positive_int(max_order, 'max_order',
+                                            minimum=0)
+        self.levels = (None if levels is None else
+                       check_positive_int(levels, 'levels', minimum=0))
 
     def forward(self, data: Data) -> Data:
         data = data.clone()

@@ -5,6 +5,8 @@ from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
+from tg_intrinsic.geometry.checks import (check_positive_float,
+                                          check_positive_int)
 from tg_intrinsic.geometry import (geodesic_neighbourhoods, log_map,
                                    vertex_area_weights)
 from tg_intrinsic.geometry.geodesics.logmap import (MAX_DISC_MEMORY, METHODS,
@@ -73,9 +75,11 @@ class LogMap(BaseTransform):
         if method not in METHODS:
             raise ValueError(f"'method' must be one of {METHODS}, got "
                              f"{method!r}")
-        self.radius = radius
+        self.radius = check_positive_float(radius, 'radius')
         self.method = method
-        self.max_neighbors = max_neighbors
+        self.max_neighbors = (None if max_neighbors is None else
+                              check_positive_int(max_neighbors,
+                                                 'max_neighbors'))
         self.transport = transport
         if max_memory is not None and not max_memory > 0:
             raise ValueError(f"'max_memory' must be a positive number of "
@@ -107,4 +111,5 @@ class LogMap(BaseTransform):
                   else f', max_memory={self.max_memory}')
         return (f'{self.__class__.__name__}(radius={self.radius}, '
                 f'method={self.method!r}, '
-                f'max_neighbors={self.max_neighbors}{memory})')
+                f'max_neighbors={self.max_neighbors}, '
+                f'transport={self.transport}{memory})')

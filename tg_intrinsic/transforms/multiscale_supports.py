@@ -5,6 +5,8 @@ from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
 from torch_geometric.transforms import BaseTransform
 
+from tg_intrinsic.geometry.checks import (check_positive_float,
+                                          check_positive_int)
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry import fps, geodesic_neighbourhoods, log_map
 from tg_intrinsic.geometry.geodesics.logmap import (MAX_DISC_MEMORY, METHODS,
@@ -87,8 +89,12 @@ class MultiscaleSupports(BaseTransform):
                              f"{method!r}")
         self.ratios, self.radii = ratios, radii
         self.method = method
-        self.level0_radius = level0_radius
-        self.max_neighbors = max_neighbors
+        self.level0_radius = (None if level0_radius is None else
+                              check_positive_float(level0_radius,
+                                                   'level0_radius'))
+        self.max_neighbors = (None if max_neighbors is None else
+                              check_positive_int(max_neighbors,
+                                                 'max_neighbors'))
         if max_memory is not None and not max_memory > 0:
             raise ValueError(f"'max_memory' must be a positive number of "
                              f"bytes or None, got {max_memory!r}")
@@ -160,8 +166,12 @@ class MultiscaleSupports(BaseTransform):
         return data
 
     def __repr__(self) -> str:
+        memory = ('' if self.max_memory == MAX_DISC_MEMORY
+                  else f', max_memory={self.max_memory}')
         return (f'{self.__class__.__name__}(ratios={self.ratios}, '
-                f'radii={self.radii}, method={self.method!r})')
+                f'radii={self.radii}, method={self.method!r}, '
+                f'level0_radius={self.level0_radius}, '
+                f'max_neighbors={self.max_neighbors}{memory})')
 
 
 def _cap(edge_index, cap, num_centres, local):

@@ -1,18 +1,12 @@
-"""GravoPool / GravoUnpool: constants, adjointness with the prolongation,
-batched equals per-example, gradients, bad input."""
+"""GravoPool: constants, adjointness with the prolongation, batched equals
+per-example, gradients, bad input."""
 import pytest
 import torch
-from torch_geometric.data import Batch, Data
+from torch_geometric.data import Batch
 
 from tg_intrinsic.pool import GravoPool, GravoUnpool
-from tg_intrinsic.transforms import GravoHierarchy
-
 from tests.conftest import grid_mesh, icosphere
-
-
-def hierarchy(pos, face):
-    return GravoHierarchy(lower_bound=20, max_levels=2)(
-        Data(pos=pos, face=face))
+from tests.pool.conftest import hierarchy
 
 
 def test_constants_and_adjointness():
@@ -23,9 +17,6 @@ def test_constants_and_adjointness():
     ones = torch.ones(n, 3, dtype=torch.float64)
     assert torch.allclose(GravoPool()(ones, index, weight, m),
                           torch.ones(m, 3, dtype=torch.float64))
-    assert torch.allclose(GravoUnpool()(torch.ones(m, dtype=torch.float64),
-                                        index, weight, n),
-                          torch.ones(n, dtype=torch.float64))
     # Unpooling is P; pooling is D^-1 P^T with D the column sums of P.
     g = torch.Generator().manual_seed(0)
     x = torch.randn(n, generator=g, dtype=torch.float64)
@@ -49,10 +40,6 @@ def test_batched_equals_per_example_and_gradients():
     n_a, m_a = a.pos.size(0), a.pos_1.size(0)
     alone = GravoPool()(x[:n_a], a.prolong_index_1, a.prolong_weight_1, m_a)
     assert torch.allclose(pooled[:m_a], alone)
-    back = GravoUnpool()(pooled, batch.prolong_index_1,
-                         batch.prolong_weight_1, batch.num_nodes)
-    assert torch.allclose(back[:n_a], GravoUnpool()(
-        alone, a.prolong_index_1, a.prolong_weight_1, n_a))
     assert torch.autograd.gradcheck(
         lambda t: GravoUnpool()(GravoPool()(t, a.prolong_index_1,
                                             a.prolong_weight_1, m_a),
@@ -70,9 +57,6 @@ def test_bad_input():
     with pytest.raises(ValueError, match='rows'):
         GravoPool()(x[:10], data.prolong_index_1, data.prolong_weight_1,
                     data.pos_1.size(0))
-    with pytest.raises(ValueError, match='rows'):
-        GravoUnpool()(x[:3], data.prolong_index_1, data.prolong_weight_1,
-                      data.pos.size(0))
     assert repr(GravoPool()) == 'GravoPool()'
 
 
@@ -81,7 +65,6 @@ def test_bad_indices_weights_and_sizes():
     index, weight = data.prolong_index_1, data.prolong_weight_1
     n, m = data.pos.size(0), data.pos_1.size(0)
     x = torch.randn(n, 2, dtype=torch.float64)
-    y = torch.randn(m, 2, dtype=torch.float64)
     negative = index.clone()
     negative[1, 0] = -1
     nan = weight.clone()
@@ -96,14 +79,6 @@ def test_bad_indices_weights_and_sizes():
         (lambda: GravoPool()(x, index, weight, -1),
          "'num_coarse' must be at least 0"),
         (lambda: GravoPool()(x.long(), index, weight, m), "'x' must be float"),
-        (lambda: GravoUnpool()(y, index, weight, n - 1),
-         rf"outside \[0, {n - 1}\): there are only {n - 1} fine points"),
-        (lambda: GravoUnpool()(y, negative, weight, n), 'outside'),
-        (lambda: GravoUnpool()(y, index.float(), weight, n), 'torch.long'),
-        (lambda: GravoUnpool()(y, index, nan, n),
-         "'prolong_weight' contains NaN"),
-        (lambda: GravoUnpool()(y, index, weight, 2.5),
-         "'num_fine' must be an integer"),
     ]
     for call, match in cases:
         with pytest.raises(ValueError, match=match):

@@ -206,3 +206,31 @@ def test_vector_stream_ablation_runs():
     assert model(batch).shape == (3, 4)
 
 
+def test_repr_shows_the_architecture():
+    model = DeltaNetClassification(3, 7, conv_channels=(8, 16), k=6,
+                                   vector_stream=False)
+    assert repr(model) == ('DeltaNetClassification(3, 7, conv_channels=(8, '
+                           '16), vector_stream=False)')
+
+
+@pytest.mark.parametrize('sizes', [(40, 40), (40, 55)])
+def test_logits_do_not_depend_on_the_order_of_the_points(sizes):
+    # Equal sizes take the fused embedding, unequal ones PyG's pooling;
+    # both must see a set of points, not a sequence.
+    torch.manual_seed(3)
+    model = DeltaNetClassification(3, 5, conv_channels=(8, 8), k=6,
+                                   embedding_size=16).double()
+    data_list = make_batch(sizes, frames=False)
+    model(Batch.from_data_list(data_list))  # running statistics
+    model.eval()
+    out = model(Batch.from_data_list(data_list))
+    generator = torch.Generator().manual_seed(4)
+    shuffled = []
+    for data in data_list:
+        order = torch.randperm(data.num_nodes, generator=generator)
+        shuffled.append(Data(pos=data.pos[order], normal=data.normal[order]))
+    out2 = model(Batch.from_data_list(shuffled))
+    assert out.shape == (len(sizes), 5) and out.abs().max() > 1e-3
+    torch.testing.assert_close(out2, out, rtol=1e-9, atol=1e-12)
+    # The two shapes get different logits: the model is not constant.
+    assert not torch.allclose(out[0], out[1], rtol=1e-3, atol=1e-6)

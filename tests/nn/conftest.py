@@ -113,3 +113,18 @@ def no_sparse_kernel(monkeypatch):
         raise AssertionError('a sparse kernel ran before the input checks')
 
     monkeypatch.setattr(SparseMM, 'apply', fail)
+
+
+def permute_points(data, order):
+    """The same two-level data with its level-0 points listed in ``order``
+    (new point k is old point ``order[k]``); edges keep their order, so the
+    per-edge terms stay as they are."""
+    inverse = torch.empty_like(order)
+    inverse[order] = torch.arange(order.numel())
+    out = data.clone()
+    out.x, out.pos = data.x[order], data.pos[order]
+    out.edge_index = inverse[data.edge_index]
+    out.cluster_1 = data.cluster_1[order]
+    out.pool_transport_1 = data.pool_transport_1[order]
+    out.sample_index_1 = inverse[data.sample_index_1]
+    return out

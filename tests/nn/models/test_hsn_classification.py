@@ -6,7 +6,7 @@ from torch_geometric.data import Batch
 
 from tg_intrinsic.nn.models import HSNClassification
 from tests.conftest import rel
-from tests.nn.conftest import RINGS, two_level_data
+from tests.nn.conftest import RINGS, permute_points, two_level_data
 
 
 @pytest.mark.parametrize('max_order', [1, 2])
@@ -81,4 +81,43 @@ def test_pooling_level_mismatch_is_explained():
     data = two_level_data(1)
     data.cluster_1 = data.cluster_1.float()
     with pytest.raises(ValueError, match="'cluster' must hold integer"):
+        model(data)
+
+
+def test_logits_do_not_depend_on_the_order_of_the_points():
+    torch.manual_seed(0)
+    model = HSNClassification(3, 5, channels=(4, 6), max_order=1,
+                              rings=RINGS).double().eval()
+    with torch.no_grad():
+        for p in model.parameters():  # no trivial zero outputs
+            p.add_(0.05 * torch.randn_like(p))
+    data = two_level_data(1, max_order=1)
+    order = torch.randperm(50, generator=torch.Generator().manual_seed(3))
+    out = model(data)
+    out2 = model(permute_points(data, order))
+    assert out.shape == (1, 5)
+    assert rel(out2, out) < 1e-10
+    # another shape gets other logits: the model is not constant
+    assert rel(model(two_level_data(2, max_order=1)), out) > 1e-3
+
+
+def test_repr():
+    model = HSNClassification(3, 5, channels=(4, 6), max_order=2, rings=RINGS)
+    assert repr(model) == ('HSNClassification(3, 5, channels=(4, 6), '
+                           'max_order=2, rings=4)')
+
+
+@pytest.mark.parametrize('key,match', [
+    ('cluster_1', "the data lacks 'cluster_1'; build the pooling levels "
+                  "with MultiscaleSupports"),
+    ('pool_transport_1', "the data lacks 'pool_transport_1'"),
+    ('transport', r"the data lacks \['transport'\]; build it with LogMap"),
+    ('edge_index_1', r"the data lacks \['edge_index_1'\]"),
+])
+def test_missing_levels_are_explained(key, match):
+    model = HSNClassification(3, 5, channels=(4, 6), max_order=1,
+                              rings=RINGS).double()
+    data = two_level_data(1, max_order=1)
+    del data[key]
+    with pytest.raises(ValueError, match=match):
         model(data)

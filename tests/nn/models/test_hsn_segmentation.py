@@ -6,7 +6,7 @@ from torch_geometric.data import Batch
 
 from tg_intrinsic.nn.models import HSNSegmentation
 from tests.conftest import rel
-from tests.nn.conftest import RINGS, two_level_data
+from tests.nn.conftest import RINGS, permute_points, two_level_data
 
 
 @pytest.mark.parametrize('max_order', [1, 2])
@@ -62,3 +62,44 @@ def test_constructors_need_positive_sizes():
         HSNSegmentation(3, 5, channels=(4, 0))
     with pytest.raises(ValueError, match="'rings' must be at least 1"):
         HSNSegmentation(3, 5, rings=0)
+
+
+def test_logits_follow_the_points_when_they_are_reordered():
+    # the logits of a point do not depend on where it is listed
+    torch.manual_seed(0)
+    model = HSNSegmentation(3, 5, channels=(4, 6), max_order=1,
+                            rings=RINGS).double().eval()
+    with torch.no_grad():
+        for p in model.parameters():  # no trivial zero outputs
+            p.add_(0.05 * torch.randn_like(p))
+    data = two_level_data(1, max_order=1)
+    order = torch.randperm(50, generator=torch.Generator().manual_seed(3))
+    out = model(data)
+    out2 = model(permute_points(data, order))
+    expected = out[order]
+    assert out.shape == (50, 5)
+    assert rel(out2, expected) < 1e-10
+    # the points get different logits: the comparison can fail
+    assert rel(out2, out) > 1e-3
+
+
+def test_repr():
+    model = HSNSegmentation(3, 5, channels=(4, 6), max_order=2, rings=RINGS)
+    assert repr(model) == ('HSNSegmentation(3, 5, channels=(4, 6), '
+                           'max_order=2, rings=4)')
+
+
+@pytest.mark.parametrize('key,match', [
+    ('cluster_1', "the data lacks 'cluster_1'; build the pooling levels "
+                  "with MultiscaleSupports"),
+    ('pool_transport_1', "the data lacks 'pool_transport_1'"),
+    ('transport', r"the data lacks \['transport'\]; build it with LogMap"),
+    ('edge_index_1', r"the data lacks \['edge_index_1'\]"),
+])
+def test_missing_levels_are_explained(key, match):
+    model = HSNSegmentation(3, 5, channels=(4, 6), max_order=1,
+                            rings=RINGS).double()
+    data = two_level_data(1, max_order=1)
+    del data[key]
+    with pytest.raises(ValueError, match=match):
+        model(data)

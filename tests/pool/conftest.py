@@ -36,3 +36,17 @@ def gauge_setup():
     # transport j -> c(j) seen in turned frames
     phi2 = phi - coarse_angle[cluster] + fine_angle
     return n_coarse, cluster, phi, x, fine_angle, coarse_angle, phi2
+
+
+def small_prolongation():
+    """A hand-made prolongation of 5 fine points onto 3 coarse ones:
+    ``(prolong_index, prolong_weight, P)`` with ``P`` the dense
+    ``[5, 3]`` matrix, built entry by entry."""
+    index = torch.tensor([[0, 1, 1, 2, 3, 3, 4, 4],
+                          [0, 0, 1, 1, 1, 2, 2, 0]])
+    weight = torch.tensor([1.0, 0.25, 0.75, 1.0, 0.5, 0.5, 0.9, 0.1],
+                          dtype=torch.float64)
+    dense = torch.zeros(5, 3, dtype=torch.float64)
+    for (fine, coarse), w in zip(index.t().tolist(), weight.tolist()):
+        dense[fine, coarse] += w
+    return index, weight, dense

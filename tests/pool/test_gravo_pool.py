@@ -6,7 +6,7 @@ from torch_geometric.data import Batch
 
 from tg_intrinsic.pool import GravoPool, GravoUnpool
 from tests.conftest import grid_mesh, icosphere
-from tests.pool.conftest import hierarchy
+from tests.pool.conftest import hierarchy, small_prolongation
 
 
 def test_constants_and_adjointness():
@@ -83,3 +83,34 @@ def test_bad_indices_weights_and_sizes():
     for call, match in cases:
         with pytest.raises(ValueError, match=match):
             call()
+
+
+@pytest.mark.parametrize('shape', [(5, ), (5, 3), (5, 2, 2)])
+def test_pool_is_the_normalised_transposed_prolongation(shape):
+    # x_c = sum_i P_ic x_i / sum_i P_ic, with P written out densely
+    index, weight, dense = small_prolongation()
+    x = torch.randn(shape, dtype=torch.float64,
+                    generator=torch.Generator().manual_seed(0))
+    out = GravoPool()(x, index, weight, 3)
+    assert out.shape == (3, ) + shape[1:]
+    flat = x.reshape(5, -1)
+    expected = torch.stack([
+        sum(dense[i, c] * flat[i] for i in range(5)) / dense[:, c].sum()
+        for c in range(3)])
+    torch.testing.assert_close(out.reshape(3, -1), expected)
+
+
+def test_weights_in_another_dtype_keep_the_features_dtype():
+    index, weight, dense = small_prolongation()
+    x = torch.randn(5, 2, dtype=torch.float64)
+    out = GravoPool()(x, index, weight.float(), 3)
+    assert out.dtype == torch.float64
+    torch.testing.assert_close(out, GravoPool()(x, index, weight, 3),
+                               rtol=1e-6, atol=1e-7)
+
+
+def test_a_coarse_point_without_weight_is_explained():
+    index, weight, _ = small_prolongation()
+    x = torch.randn(5, 2, dtype=torch.float64)
+    with pytest.raises(ValueError, match='receives no weight'):
+        GravoPool()(x, index, weight, 4)  # coarse point 3 has no fine one

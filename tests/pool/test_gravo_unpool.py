@@ -1,11 +1,12 @@
-"""GravoUnpool: constants, batched equals per-example, bad input."""
+"""GravoUnpool: the prolongation against its dense matrix (values and
+gradients), constants, batched equals per-example, bad input."""
 import pytest
 import torch
 from torch_geometric.data import Batch
 
 from tg_intrinsic.pool import GravoPool, GravoUnpool
 from tests.conftest import grid_mesh, icosphere
-from tests.pool.conftest import hierarchy
+from tests.pool.conftest import hierarchy, small_prolongation
 
 
 def test_constants():
@@ -64,3 +65,32 @@ def test_bad_indices_weights_and_sizes():
     for call, match in cases:
         with pytest.raises(ValueError, match=match):
             call()
+
+
+@pytest.mark.parametrize('shape', [(3, ), (3, 4), (3, 2, 2)])
+def test_unpool_is_the_prolongation(shape):
+    # x_i = sum_c P_ic x_c, with P written out densely
+    index, weight, dense = small_prolongation()
+    y = torch.randn(shape, dtype=torch.float64, requires_grad=True,
+                    generator=torch.Generator().manual_seed(0))
+    out = GravoUnpool()(y, index, weight, 5)
+    assert out.shape == (5, ) + shape[1:]
+    flat = y.detach().reshape(3, -1)
+    expected = torch.stack([sum(dense[i, c] * flat[c] for c in range(3))
+                            for i in range(5)])
+    torch.testing.assert_close(out.detach().reshape(5, -1), expected)
+    # the backward pass is the transpose
+    g = torch.randn(out.shape, dtype=torch.float64)
+    (grad, ) = torch.autograd.grad(out, y, g)
+    torch.testing.assert_close(grad.reshape(3, -1),
+                               dense.t() @ g.reshape(5, -1))
+
+
+def test_fine_points_without_a_coarse_one_get_zero():
+    index, weight, _ = small_prolongation()
+    out = GravoUnpool()(torch.ones(3, dtype=torch.float64), index, weight, 7)
+    assert out.shape == (7, ) and (out[5:] == 0).all() and (out[:5] > 0).all()
+
+
+def test_repr():
+    assert repr(GravoUnpool()) == 'GravoUnpool()'

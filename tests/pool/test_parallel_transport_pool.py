@@ -1,8 +1,14 @@
+"""ParallelTransportPool: the transported mean (or sum) of every cluster
+against a loop over the points, empty clusters, gauge equivariance, bad
+input."""
+import cmath
+
 import pytest
 import torch
 
 from tg_intrinsic.pool import ParallelTransportPool
 from tests.conftest import rel
+from tests.pool.conftest import clusters
 from tests.symmetry import rotate_streams
 
 
@@ -40,3 +46,53 @@ def test_pool_rejects_bad_input():
     for call, match in cases:
         with pytest.raises(ValueError, match=match):
             call()
+
+
+def brute_force_pool(x, cluster, phi, num_clusters, mean):
+    """Every cluster's sum (or mean) of e^{i M phi_j} x_j^M, point by point
+    with Python complex numbers."""
+    n, streams, channels = x.shape
+    out = torch.zeros(num_clusters, streams, channels, dtype=x.dtype)
+    count = [0] * num_clusters
+    for j in range(n):
+        c = int(cluster[j])
+        count[c] += 1
+        for m in range(streams):
+            out[c, m] += x[j, m] * cmath.exp(1j * m * float(phi[j]))
+    if mean:
+        for c in range(num_clusters):
+            out[c] /= max(count[c], 1)
+    return out
+
+
+@pytest.mark.parametrize('reduce', ['mean', 'sum'])
+def test_pool_matches_a_loop_over_the_points(reduce):
+    gen = torch.Generator().manual_seed(4)
+    x = torch.randn(15, 3, 2, dtype=torch.complex128, generator=gen)
+    cluster, phi = clusters(15, 4, gen)
+    out = ParallelTransportPool(reduce)(x, cluster, phi, 4)
+    assert out.shape == (4, 3, 2)
+    torch.testing.assert_close(
+        out, brute_force_pool(x, cluster, phi, 4, reduce == 'mean'))
+    # without a cluster count the largest index decides
+    torch.testing.assert_close(ParallelTransportPool(reduce)(x, cluster, phi),
+                               out)
+
+
+def test_empty_clusters_are_zero():
+    gen = torch.Generator().manual_seed(5)
+    x = torch.randn(6, 2, 3, dtype=torch.complex128, generator=gen)
+    cluster, phi = clusters(6, 2, gen)
+    out = ParallelTransportPool()(x, cluster, phi, 4)
+    assert out.shape == (4, 2, 3)
+    assert (out[2:] == 0).all() and (out[:2] != 0).all()
+
+
+def test_reduce_is_checked_and_shown():
+    assert repr(ParallelTransportPool()) == \
+        "ParallelTransportPool(reduce='mean')"
+    assert repr(ParallelTransportPool('sum')) == \
+        "ParallelTransportPool(reduce='sum')"
+    with pytest.raises(ValueError, match="reduce must be 'mean' or 'sum', "
+                                         "got 'max'"):
+        ParallelTransportPool('max')

@@ -1,8 +1,14 @@
+"""ParallelTransportUnpool: the copy transported back into every fine
+point's frame against a loop, gauge equivariance, pooling it back gives the
+coarse features, bad input."""
+import cmath
+
 import pytest
 import torch
 
 from tg_intrinsic.pool import ParallelTransportPool, ParallelTransportUnpool
 from tests.conftest import rel
+from tests.pool.conftest import clusters
 from tests.symmetry import rotate_streams
 
 
@@ -46,3 +52,21 @@ def test_unpool_rejects_bad_input():
     for call, match in cases:
         with pytest.raises(ValueError, match=match):
             call()
+
+
+def test_unpool_matches_a_loop_over_the_points():
+    # x_j^M = e^{-i M phi_j} x_{c(j)}^M
+    gen = torch.Generator().manual_seed(4)
+    y = torch.randn(4, 3, 2, dtype=torch.complex128, generator=gen)
+    cluster, phi = clusters(15, 4, gen)
+    out = ParallelTransportUnpool()(y, cluster, phi)
+    assert out.shape == (15, 3, 2)
+    for j in range(15):
+        for m in range(3):
+            expected = y[int(cluster[j]), m] * cmath.exp(-1j * m *
+                                                         float(phi[j]))
+            torch.testing.assert_close(out[j, m], expected)
+
+
+def test_repr():
+    assert repr(ParallelTransportUnpool()) == 'ParallelTransportUnpool()'

@@ -208,3 +208,71 @@ def test_constructors_need_positive_channel_counts(make, match):
         make()
 
 
+
+
+def _bad_graphs():
+    """(name, edit of (edge_index, harmonic, transport), expected error) for
+    a layer with max_order = prev_order = 1 and 3 rings."""
+    def nan(transport):
+        transport = transport.clone()
+        transport[5] = float('nan')
+        return transport
+
+    return [
+        ('harmonic without rings', lambda e, h, t: (e, h[:, 0], t),
+         r"'harmonic' must be complex \[E, rings, orders\]"),
+        ('real harmonic', lambda e, h, t: (e, h.real, t),
+         r"'harmonic' must be complex \[E, rings, orders\] \(from "
+         r"HarmonicPrecompute\), got torch.float64"),
+        ('too few orders', lambda e, h, t: (e, h[:, :, :1], t),
+         "'harmonic' holds orders up to 0 but this layer needs 1; "
+         "precompute with max_order >= 1"),
+        ('other rings', lambda e, h, t: (e, h[:, :2], t),
+         "'harmonic' has 2 rings but this layer has 3"),
+        ('harmonic of other edges', lambda e, h, t: (e, h[:-1], t),
+         r"'edge_index' must be \[2, E\] with E = \d+ \(the rows of "
+         r"'harmonic'\)"),
+        ('short transport', lambda e, h, t: (e, h, t[:-1]),
+         r"'transport' must be \[E\] with E = \d+ \(the rows of "
+         r"'harmonic'\), got \[\d+\]"),
+        ('transport per node', lambda e, h, t: (e, h, t[:, None]),
+         r"'transport' must be \[E\]"),
+        ('NaN transport', lambda e, h, t: (e, h, nan(t)),
+         "'transport' contains NaN"),
+        ('integer transport', lambda e, h, t: (e, h, t.long()),
+         "'transport' must be a float tensor"),
+        ('harmonic as a list', lambda e, h, t: (e, h.tolist(), t),
+         "'harmonic' must be a torch.Tensor"),
+    ]
+
+
+@pytest.mark.parametrize('backend', ['message', 'sparse'])
+@pytest.mark.parametrize('name,edit,match', _bad_graphs(),
+                         ids=[case[0] for case in _bad_graphs()])
+def test_per_edge_inputs_are_checked_before_use(backend, name, edit, match,
+                                                monkeypatch):
+    # The message backend used to fail with an obscure view or index error
+    # (or an einsum error for other rings); both backends check alike now.
+    edge_index, logmap, transport, weight, radius = random_discs()
+    harmonic = harmonic_terms(edge_index, logmap, weight, radius, 3, 1)
+    conv = HarmonicConv(2, 3, max_order=1, rings=3, prev_order=1).double()
+    x = torch.randn(60, 2, 2, dtype=C128)
+    conv(x, edge_index, harmonic, transport, backend=backend)  # all well
+    no_sparse_kernel(monkeypatch)
+
+    def fail(*args, **kwargs):
+        raise AssertionError('messages ran before the input checks')
+
+    monkeypatch.setattr(conv, 'propagate', fail)
+    with pytest.raises(ValueError, match=match):
+        conv(x, *edit(edge_index, harmonic, transport), backend=backend)
+
+
+def test_operator_checks_the_per_edge_inputs_alike():
+    edge_index, logmap, transport, weight, radius = random_discs()
+    harmonic = harmonic_terms(edge_index, logmap, weight, radius, 3, 1)
+    for name, edit, match in _bad_graphs():
+        if name == 'other rings':  # an operator takes any number of rings
+            continue
+        with pytest.raises(ValueError, match=match):
+            HarmonicOperator(*edit(edge_index, harmonic, transport), 60, 2, 2)

@@ -172,3 +172,9 @@ def test_vector_output_needs_vector_input():
 def test_layer_constructors_need_positive_sizes(make, match):
     with pytest.raises(ValueError, match=match):
         make()
+
+
+def test_repr_shows_the_options():
+    assert repr(DeltaConv(3, 8, depth=2, centralized=True, vector=False)) \
+        == ('DeltaConv(3, 8, depth=2, centralized=True, vector=False, '
+            'vector_input=True)')

@@ -113,3 +113,23 @@ def test_repr_shows_the_architecture():
 def test_layer_constructors_need_positive_sizes(make, match):
     with pytest.raises(ValueError, match=match):
         make()
+
+
+@pytest.mark.parametrize('category,match', [
+    (torch.tensor([4]), r"'data.category' holds indices in \[4, 4\], "
+                        r"outside \[0, 4\): there are only 4 categories"),
+    (torch.tensor([-1]), r"'data.category' holds indices in \[-1, -1\]"),
+    (torch.tensor([1.0]), "'data.category' must hold integer indices"),
+    (torch.tensor([[1.0, 0.0, 0.0]]), r"'data.category' must hold a category "
+                                      r"index per example \[B\] = \[2\] or "
+                                      r"one-hot vectors \[B, num_categories\]"
+                                      r" = \[2, 4\], got \[2, 3\]"),
+])
+def test_bad_categories_are_explained(category, match):
+    # one_hot and the category embedding used to fail with RuntimeErrors
+    model = tiny_model(num_categories=4)
+    data_list = make_batch((30, 30), frames=False)
+    for data in data_list:
+        data.category = category
+    with pytest.raises(ValueError, match=match):
+        model(Batch.from_data_list(data_list))

@@ -14,6 +14,11 @@ if os.environ.get('CI'):
     settings.load_profile('ci')
 
 
+def rel(a, b):
+    """Largest difference relative to the largest entry of ``b``."""
+    return float((a - b).abs().max().detach() / b.abs().max().detach())
+
+
 def icosphere(subdivisions=2, dtype=torch.float64):
     mesh = trimesh.creation.icosphere(subdivisions=subdivisions)
     pos = torch.tensor(mesh.vertices, dtype=dtype)

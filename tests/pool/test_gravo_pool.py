@@ -1,18 +1,12 @@
-"""GravoPool / GravoUnpool: constants, adjointness with the prolongation,
-batched equals per-example, gradients, bad input."""
+"""GravoPool: constants, adjointness with the prolongation, batched equals
+per-example, gradients, bad input."""
 import pytest
 import torch
-from torch_geometric.data import Batch, Data
+from torch_geometric.data import Batch
 
 from tg_intrinsic.pool import GravoPool, GravoUnpool
-from tg_intrinsic.transforms import GravoHierarchy
-
 from tests.conftest import grid_mesh, icosphere
-
-
-def hierarchy(pos, face):
-    return GravoHierarchy(lower_bound=20, max_levels=2)(
-        Data(pos=pos, face=face))
+from tests.pool.conftest import hierarchy, small_prolongation
 
 
 def test_constants_and_adjointness():
@@ -23,9 +17,6 @@ def test_constants_and_adjointness():
     ones = torch.ones(n, 3, dtype=torch.float64)
     assert torch.allclose(GravoPool()(ones, index, weight, m),
                           torch.ones(m, 3, dtype=torch.float64))
-    assert torch.allclose(GravoUnpool()(torch.ones(m, dtype=torch.float64),
-                                        index, weight, n),
-                          torch.ones(n, dtype=torch.float64))
     # Unpooling is P; pooling is D^-1 P^T with D the column sums of P.
     g = torch.Generator().manual_seed(0)
     x = torch.randn(n, generator=g, dtype=torch.float64)
@@ -49,10 +40,6 @@ def test_batched_equals_per_example_and_gradients():
     n_a, m_a = a.pos.size(0), a.pos_1.size(0)
     alone = GravoPool()(x[:n_a], a.prolong_index_1, a.prolong_weight_1, m_a)
     assert torch.allclose(pooled[:m_a], alone)
-    back = GravoUnpool()(pooled, batch.prolong_index_1,
-                         batch.prolong_weight_1, batch.num_nodes)
-    assert torch.allclose(back[:n_a], GravoUnpool()(
-        alone, a.prolong_index_1, a.prolong_weight_1, n_a))
     assert torch.autograd.gradcheck(
         lambda t: GravoUnpool()(GravoPool()(t, a.prolong_index_1,
                                             a.prolong_weight_1, m_a),
@@ -70,9 +57,6 @@ def test_bad_input():
     with pytest.raises(ValueError, match='rows'):
         GravoPool()(x[:10], data.prolong_index_1, data.prolong_weight_1,
                     data.pos_1.size(0))
-    with pytest.raises(ValueError, match='rows'):
-        GravoUnpool()(x[:3], data.prolong_index_1, data.prolong_weight_1,
-                      data.pos.size(0))
     assert repr(GravoPool()) == 'GravoPool()'
 
 
@@ -81,7 +65,6 @@ def test_bad_indices_weights_and_sizes():
     index, weight = data.prolong_index_1, data.prolong_weight_1
     n, m = data.pos.size(0), data.pos_1.size(0)
     x = torch.randn(n, 2, dtype=torch.float64)
-    y = torch.randn(m, 2, dtype=torch.float64)
     negative = index.clone()
     negative[1, 0] = -1
     nan = weight.clone()
@@ -96,15 +79,38 @@ def test_bad_indices_weights_and_sizes():
         (lambda: GravoPool()(x, index, weight, -1),
          "'num_coarse' must be at least 0"),
         (lambda: GravoPool()(x.long(), index, weight, m), "'x' must be float"),
-        (lambda: GravoUnpool()(y, index, weight, n - 1),
-         rf"outside \[0, {n - 1}\): there are only {n - 1} fine points"),
-        (lambda: GravoUnpool()(y, negative, weight, n), 'outside'),
-        (lambda: GravoUnpool()(y, index.float(), weight, n), 'torch.long'),
-        (lambda: GravoUnpool()(y, index, nan, n),
-         "'prolong_weight' contains NaN"),
-        (lambda: GravoUnpool()(y, index, weight, 2.5),
-         "'num_fine' must be an integer"),
     ]
     for call, match in cases:
         with pytest.raises(ValueError, match=match):
             call()
+
+
+@pytest.mark.parametrize('shape', [(5, ), (5, 3), (5, 2, 2)])
+def test_pool_is_the_normalised_transposed_prolongation(shape):
+    # x_c = sum_i P_ic x_i / sum_i P_ic, with P written out densely
+    index, weight, dense = small_prolongation()
+    x = torch.randn(shape, dtype=torch.float64,
+                    generator=torch.Generator().manual_seed(0))
+    out = GravoPool()(x, index, weight, 3)
+    assert out.shape == (3, ) + shape[1:]
+    flat = x.reshape(5, -1)
+    expected = torch.stack([
+        sum(dense[i, c] * flat[i] for i in range(5)) / dense[:, c].sum()
+        for c in range(3)])
+    torch.testing.assert_close(out.reshape(3, -1), expected)
+
+
+def test_weights_in_another_dtype_keep_the_features_dtype():
+    index, weight, dense = small_prolongation()
+    x = torch.randn(5, 2, dtype=torch.float64)
+    out = GravoPool()(x, index, weight.float(), 3)
+    assert out.dtype == torch.float64
+    torch.testing.assert_close(out, GravoPool()(x, index, weight, 3),
+                               rtol=1e-6, atol=1e-7)
+
+
+def test_a_coarse_point_without_weight_is_explained():
+    index, weight, _ = small_prolongation()
+    x = torch.randn(5, 2, dtype=torch.float64)
+    with pytest.raises(ValueError, match='receives no weight'):
+        GravoPool()(x, index, weight, 4)  # coarse point 3 has no fine one

@@ -2,7 +2,7 @@ import torch
 from torch import Tensor
 from torch.nn import Parameter
 
-from tg_intrinsic.geometry.checks import check_positive_int
+from tg_intrinsic.geometry.checks import check_positive_int, check_streams
 
 
 class ComplexBatchNorm(torch.nn.Module):
@@ -46,8 +46,8 @@ class ComplexBatchNorm(torch.nn.Module):
         self.running_square.fill_(1.0)
 
     def forward(self, z: Tensor) -> Tensor:
-        if z.dim() != 3 or tuple(z.shape[1:]) != (self.streams,
-                                                   self.channels):
+        check_streams(z, 'z')
+        if tuple(z.shape[1:]) != (self.streams, self.channels):
             raise ValueError(f"expected complex features [N, {self.streams}, "
                              f"{self.channels}], got {list(z.shape)}")
         if self.training and z.size(0) > 0:

@@ -4,7 +4,7 @@ import torch
 from torch import Tensor
 from torch.nn import Parameter
 
-from tg_intrinsic.geometry.checks import check_positive_int
+from tg_intrinsic.geometry.checks import check_positive_int, check_streams
 
 
 class ComplexLinear(torch.nn.Module):
@@ -50,7 +50,8 @@ class ComplexLinear(torch.nn.Module):
             torch.nn.init.zeros_(self.bias)
 
     def forward(self, z: Tensor) -> Tensor:
-        if z.dim() != 3 or z.size(-1) != self.in_channels:
+        check_streams(z, 'z')
+        if z.size(-1) != self.in_channels:
             raise ValueError(f"expected complex features [N, streams, "
                              f"{self.in_channels}], got {list(z.shape)}")
         out = torch.complex(z.real @ self.weight, z.imag @ self.weight)

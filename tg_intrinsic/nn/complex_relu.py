@@ -2,7 +2,7 @@ import torch
 from torch import Tensor
 from torch.nn import Parameter
 
-from tg_intrinsic.geometry.checks import check_positive_int
+from tg_intrinsic.geometry.checks import check_positive_int, check_streams
 
 
 class ComplexReLU(torch.nn.Module):
@@ -32,6 +32,10 @@ class ComplexReLU(torch.nn.Module):
         torch.nn.init.zeros_(self.bias)
 
     def forward(self, z: Tensor) -> Tensor:
+        check_streams(z, 'z')
+        if z.size(-1) != self.channels:
+            raise ValueError(f"expected complex features [N, streams, "
+                             f"{self.channels}], got {list(z.shape)}")
         magnitude = z.abs()
         # Where |z| = 0 the phase is undefined; the output is 0 there and the
         # division is kept away from 0 so that no NaN reaches the gradient.

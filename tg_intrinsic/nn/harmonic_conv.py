@@ -9,7 +9,8 @@ from torch_geometric.nn import MessagePassing
 from tg_intrinsic.geometry.checks import (check_edge_index,
                                           check_positive_int, check_rows,
                                           check_tensor)
-from tg_intrinsic.geometry.geodesics.harmonic import HarmonicOperator
+from tg_intrinsic.geometry.geodesics.harmonic import (HarmonicOperator,
+                                                      check_harmonic_graph)
 
 
 class HarmonicConv(MessagePassing):
@@ -141,6 +142,10 @@ class HarmonicConv(MessagePassing):
             check_edge_index(edge_index, x.size(0), x,
                              "rows in 'x' (one per node of the graph)",
                              ref_name='x')
+            # Messages index harmonic by order and view it by rings.
+            check_harmonic_graph(edge_index, harmonic, transport,
+                                 max(self.prev_order, self.max_order) + 1,
+                                 self.rings)
         if backend == 'message':
             y = self.propagate(edge_index, x=x.flatten(1), harmonic=harmonic,
                                transport=transport, size=None)

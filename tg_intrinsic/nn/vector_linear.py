@@ -3,8 +3,21 @@ import math
 import torch
 from torch import Tensor
 
-from tg_intrinsic.geometry.checks import check_positive_int
+from tg_intrinsic.geometry.checks import check_positive_int, check_tensor
 from tg_intrinsic.geometry.pointcloud.operators import interleaved, planar
+
+
+def check_vector_features(v, name: str, channels: int) -> Tensor:
+    """Float tangent vector features ``[N, channels, 2]``; checked before
+    the layers view them as planes (which would silently accept a wrong
+    last dimension)."""
+    v = check_tensor(v, name)
+    if v.dim() != 3 or v.size(1) != channels or v.size(2) != 2 \
+            or not v.is_floating_point():
+        raise ValueError(f"'{name}' must be float tangent vector features "
+                         f"[N, {channels}, 2], got {v.dtype} of shape "
+                         f"{list(v.shape)}")
+    return v
 
 
 class VectorLinear(torch.nn.Module):
@@ -38,6 +51,7 @@ class VectorLinear(torch.nn.Module):
         torch.nn.init.kaiming_uniform_(self.weight, a=math.sqrt(5))
 
     def forward(self, v: Tensor) -> Tensor:
+        check_vector_features(v, 'v', self.in_channels)
         # On the [2, N, C] planes this is one matrix product, no copies.
         return interleaved(torch.nn.functional.linear(planar(v), self.weight))
 

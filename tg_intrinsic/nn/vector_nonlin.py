@@ -4,6 +4,7 @@ from torch import Tensor
 from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.geometry.pointcloud.operators import (interleaved, planar,
                                                         vector_norm)
+from tg_intrinsic.nn.vector_linear import check_vector_features
 
 
 class VectorNonLin(torch.nn.Module):
@@ -49,6 +50,7 @@ class VectorNonLin(torch.nn.Module):
             torch.nn.init.zeros_(self.bias)
 
     def forward(self, v: Tensor) -> Tensor:
+        check_vector_features(v, 'v', self.channels)
         # The norm with an eps inside the root keeps gradients finite at 0.
         length = vector_norm(v, self.eps)
         shifted = self.norm(length) if self.norm is not None \

@@ -34,7 +34,7 @@ from torch import Tensor
 
 from ..checks import (check_edge_index, check_float_tensor,
                       check_positive_float, check_positive_int, check_rows,
-                      check_tensor)
+                      check_tensor, same_device)
 # A^H is what complex autograd needs in the backward pass.
 from ..sparse import SparseMM
 
@@ -125,6 +125,54 @@ def harmonic_terms(edge_index: Tensor, logmap: Tensor, weight: Tensor,
     return (w.unsqueeze(1) * mu).unsqueeze(2) * phase.unsqueeze(1)
 
 
+def check_harmonic_graph(edge_index: Tensor, harmonic: Tensor,
+                         transport: Tensor, orders: int,
+                         rings: Optional[int] = None) -> Tensor:
+    r"""Checks the per-edge inputs of a harmonic convolution against each
+    other, before any of them is indexed: ``harmonic`` complex
+    :math:`(E, Q, K)` with :math:`K \geq` ``orders`` (and :math:`Q =`
+    ``rings`` when given), ``edge_index`` :math:`(2, E)` and ``transport``
+    finite float :math:`(E)` on the device of ``harmonic``. Whether the
+    indices of ``edge_index`` lie in range is left to
+    :func:`~tg_intrinsic.geometry.checks.check_edge_index`, which knows
+    what they index.
+
+    Args:
+        edge_index (torch.Tensor): Disc graph.
+        harmonic (torch.Tensor): :func:`harmonic_terms`.
+        transport (torch.Tensor): :math:`\phi_{ji}` per edge.
+        orders (int): Orders the caller reads, :math:`\max(P, O) + 1`.
+        rings (int, optional): Rings the caller expects.
+
+    Returns:
+        ``harmonic``.
+    """
+    harmonic = check_tensor(harmonic, 'harmonic')
+    edge_index = check_tensor(edge_index, 'edge_index')
+    transport = check_tensor(transport, 'transport')
+    if not harmonic.is_complex() or harmonic.dim() != 3:
+        raise ValueError(f"'harmonic' must be complex [E, rings, orders] "
+                         f"(from HarmonicPrecompute), got {harmonic.dtype} "
+                         f"of shape {list(harmonic.shape)}")
+    e, q_count, k = harmonic.shape
+    if k < orders:
+        raise ValueError(f"'harmonic' holds orders up to {k - 1} but "
+                         f"this layer needs {orders - 1}; precompute with "
+                         f"max_order >= {orders - 1}")
+    if rings is not None and q_count != rings:
+        raise ValueError(f"'harmonic' has {q_count} rings but this layer has "
+                         f"{rings}; precompute with rings={rings}")
+    if tuple(edge_index.shape) != (2, e):
+        raise ValueError(f"'edge_index' must be [2, E] with E = {e} (the "
+                         f"rows of 'harmonic'), got {list(edge_index.shape)}")
+    if tuple(transport.shape) != (e, ):
+        raise ValueError(f"'transport' must be [E] with E = {e} (the rows "
+                         f"of 'harmonic'), got {list(transport.shape)}")
+    check_float_tensor(transport, 'transport', (e, ))
+    same_device(transport, 'transport', harmonic, 'harmonic')
+    return harmonic
+
+
 class HarmonicOperator:
     r"""The neighbourhood aggregation of a harmonic convolution as one
     sparse complex matrix, built once per (batched) disc graph and shared
@@ -157,19 +205,9 @@ class HarmonicOperator:
     def __init__(self, edge_index: Tensor, harmonic: Tensor,
                  transport: Tensor, num_nodes: int, in_orders: int,
                  out_orders: int, layout: Optional[tuple] = None):
-        if not harmonic.is_complex() or harmonic.dim() != 3:
-            raise ValueError("'harmonic' must be complex [E, rings, orders] "
-                             "(from HarmonicPrecompute)")
-        e, q_count, orders = harmonic.shape
-        need = max(in_orders, out_orders)
-        if orders < need:
-            raise ValueError(f"'harmonic' holds orders up to {orders - 1} but "
-                             f"this layer needs {need - 1}; precompute with "
-                             f"max_order >= {need - 1}")
-        if transport.shape != (e,) or edge_index.shape != (2, e):
-            raise ValueError(f"'edge_index' must be [2, E] and 'transport' "
-                             f"[E] with E = {e} (the rows of 'harmonic')")
-        check_float_tensor(transport, 'transport', (e,))
+        check_harmonic_graph(edge_index, harmonic, transport,
+                             max(in_orders, out_orders))
+        q_count = harmonic.size(1)
         self.num_nodes = n = num_nodes
         self.rings, self.in_orders, self.out_orders = q_count, in_orders, \
             out_orders
@@ -272,5 +310,5 @@ def transport_features(x: Tensor, angle: Tensor) -> Tensor:
     return x * spin.unsqueeze(2)
 
 
-__all__ = ['ring_weights', 'harmonic_terms', 'harmonic_layout',
-           'HarmonicOperator', 'transport_features']
+__all__ = ['ring_weights', 'harmonic_terms', 'check_harmonic_graph',
+           'harmonic_layout', 'HarmonicOperator', 'transport_features']

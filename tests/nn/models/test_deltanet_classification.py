@@ -1,9 +1,16 @@
+"""DeltaNetClassification: the fused channels-first embedding against the
+plain PyG layers, independence of the tangent frames, invariance to the
+order of the points, shapes, torch.compile and bad input."""
+import math
+
 import pytest
 import torch
 from torch_geometric.data import Batch, Data
 from torch_geometric.nn import global_max_pool, global_mean_pool
 
 from tg_intrinsic.nn.models import DeltaNetClassification
+from tests.nn.conftest import make_batch
+from tests.symmetry import rotate_frames
 
 
 def _clouds(sizes, seed=0):
@@ -116,3 +123,114 @@ def test_fused_embedding_refuses_a_second_backward():
 def test_constructor_needs_positive_sizes(args, kwargs, match):
     with pytest.raises(ValueError, match=match):
         DeltaNetClassification(*args, **kwargs)
+
+
+def test_deltanet_coordinate_independence():
+    torch.manual_seed(0)
+    data_list = make_batch()
+    batch = Batch.from_data_list(data_list)
+    model = DeltaNetClassification(3, 4, k=12, dropout=0.0).double()
+    theta = torch.rand(batch.num_nodes, dtype=torch.float64) * 2 * math.pi
+    rotated = batch.clone()
+    rotated.frame = rotate_frames(batch.frame, theta)
+
+    def run(data):
+        model.zero_grad()
+        out = model(data)  # train mode: batch statistics
+        out.square().sum().backward()
+        return out.detach(), [p.grad.clone() for p in model.parameters()]
+
+    out1, grads1 = run(batch)
+    out2, grads2 = run(rotated)
+    assert (out1 - out2).abs().max() <= 1e-8 * out1.abs().max()
+    for g1, g2 in zip(grads1, grads2):
+        assert (g1 - g2).abs().max() <= 1e-8 * g1.abs().max() + 1e-14
+    # A different network on the same data does change: the test can fail.
+    assert not torch.allclose(out1, model.eval()(batch))
+
+
+def test_torch_compile_matches_eager():
+    torch.manual_seed(0)
+    batch = Batch.from_data_list(make_batch(dtype=torch.float32))
+    model = DeltaNetClassification(3, 4, k=12).eval()
+    eager = model(batch)
+    compiled = torch.compile(model)
+    assert torch.allclose(compiled(batch), eager, atol=1e-5)
+
+
+def test_missing_points_and_bad_data():
+    model = DeltaNetClassification(3, 4, k=12)
+    tiny = Data(pos=torch.randn(8, 3))
+    with pytest.raises(ValueError, match='k'):
+        model(Batch.from_data_list([tiny]))
+    nan = Data(pos=torch.full((50, 3), float('nan')))
+    with pytest.raises(ValueError, match='NaN'):
+        model(Batch.from_data_list([nan]))
+
+
+def test_degenerate_clouds_give_errors_or_finite_outputs():
+    model = DeltaNetClassification(3, 4, k=12).eval()
+    g = torch.Generator().manual_seed(0)
+    # A flat patch without normals: normals are estimated (documented).
+    flat = torch.cat([torch.rand(200, 2, generator=g), torch.zeros(200, 1)],
+                     1)
+    out = model(Batch.from_data_list([Data(pos=flat)]))
+    assert torch.isfinite(out).all()
+    # Coincident points with normals given: the fit stays finite.
+    dup = torch.cat([flat, flat[:50]])
+    normal = torch.tensor([[0., 0, 1]]).expand(250, 3)
+    out = model(Batch.from_data_list([Data(pos=dup, normal=normal)]))
+    assert torch.isfinite(out).all()
+    # A line has no tangent plane to estimate: a clear error.
+    line = torch.stack([torch.linspace(0, 1, 100), torch.zeros(100),
+                        torch.zeros(100)], 1)
+    with pytest.raises(ValueError, match='degenerate'):
+        model(Batch.from_data_list([Data(pos=line)]))
+
+
+def test_shapes_and_parameter_count():
+    cls = DeltaNetClassification(3, 40)
+    n_cls = sum(p.numel() for p in cls.parameters())
+    assert 1.9e6 < n_cls < 2.2e6
+    data_list = make_batch(dtype=torch.float32, frames=False)
+    batch = Batch.from_data_list(data_list)
+    assert cls(batch).shape == (3, 40)
+    with pytest.raises(ValueError, match='input channels'):
+        DeltaNetClassification(6, 4)(batch)
+    assert 'vector_stream=True' in repr(cls)
+
+
+def test_vector_stream_ablation_runs():
+    batch = Batch.from_data_list(make_batch(dtype=torch.float32))
+    model = DeltaNetClassification(3, 4, k=12, vector_stream=False)
+    assert model(batch).shape == (3, 4)
+
+
+def test_repr_shows_the_architecture():
+    model = DeltaNetClassification(3, 7, conv_channels=(8, 16), k=6,
+                                   vector_stream=False)
+    assert repr(model) == ('DeltaNetClassification(3, 7, conv_channels=(8, '
+                           '16), vector_stream=False)')
+
+
+@pytest.mark.parametrize('sizes', [(40, 40), (40, 55)])
+def test_logits_do_not_depend_on_the_order_of_the_points(sizes):
+    # Equal sizes take the fused embedding, unequal ones PyG's pooling;
+    # both must see a set of points, not a sequence.
+    torch.manual_seed(3)
+    model = DeltaNetClassification(3, 5, conv_channels=(8, 8), k=6,
+                                   embedding_size=16).double()
+    data_list = make_batch(sizes, frames=False)
+    model(Batch.from_data_list(data_list))  # running statistics
+    model.eval()
+    out = model(Batch.from_data_list(data_list))
+    generator = torch.Generator().manual_seed(4)
+    shuffled = []
+    for data in data_list:
+        order = torch.randperm(data.num_nodes, generator=generator)
+        shuffled.append(Data(pos=data.pos[order], normal=data.normal[order]))
+    out2 = model(Batch.from_data_list(shuffled))
+    assert out.shape == (len(sizes), 5) and out.abs().max() > 1e-3
+    torch.testing.assert_close(out2, out, rtol=1e-9, atol=1e-12)
+    # The two shapes get different logits: the model is not constant.
+    assert not torch.allclose(out[0], out[1], rtol=1e-3, atol=1e-6)

@@ -1,0 +1,123 @@
+"""SVBRDFResult: the maps as arrays and textures, the .npz round trip, and
+the images written for texel and point maps, pixel by pixel against
+quantised values and matplotlib's colormap."""
+import os
+
+import numpy as np
+import pytest
+import torch
+
+from tg_intrinsic.nn import SVBRDFResult
+from tg_intrinsic.nn.svbrdf_result import MAP_INFO
+from tests.conftest import grid_mesh
+
+
+def result(n=6, entropy=True, texture_shape=None, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    return SVBRDFResult(
+        base_color=torch.rand(n, 3, generator=g, dtype=torch.float64),
+        metallic=torch.rand(n, generator=g, dtype=torch.float64),
+        roughness=torch.rand(n, generator=g, dtype=torch.float64),
+        entropy=(torch.rand(n, generator=g, dtype=torch.float64)
+                 if entropy else None),
+        loss=[2.0, 1.0], seconds=0.5, texture_shape=texture_shape)
+
+
+def quantised(value):
+    """What an 8-bit image stores of a value in [0, 1], back in [0, 1]."""
+    return np.floor(np.clip(value, 0, 1) * 255 + 0.5) / 255
+
+
+def read_png(path):
+    import matplotlib.pyplot as plt
+    return plt.imread(path)[..., :3]
+
+
+def test_maps_are_arrays_and_textures():
+    res = result()
+    maps = res.maps()
+    assert sorted(maps) == ['base_color', 'entropy', 'metallic', 'roughness']
+    for name, value in maps.items():
+        assert isinstance(value, np.ndarray)
+        np.testing.assert_array_equal(value, getattr(res, name).numpy())
+    assert 'entropy' not in result(entropy=False).maps()
+    # texels are listed row by row
+    textures = result(texture_shape=(2, 3)).maps()
+    assert textures['base_color'].shape == (2, 3, 3)
+    assert textures['roughness'].shape == (2, 3)
+    np.testing.assert_array_equal(textures['base_color'][1, 2],
+                                  res.base_color[5].numpy())
+    np.testing.assert_array_equal(textures['metallic'][1, 0],
+                                  res.metallic[3].item())
+
+
+def test_maps_detach_tensors_that_need_gradients():
+    res = result()
+    res.roughness = res.roughness.clone().requires_grad_(True)
+    np.testing.assert_array_equal(res.maps()['roughness'],
+                                  res.roughness.detach().numpy())
+
+
+def test_npz_round_trip(tmp_path):
+    res = result(texture_shape=(3, 2))
+    path = str(tmp_path / 'sub' / 'maps.npz')
+    assert res.save_npz(path) == path
+    stored = np.load(path)
+    assert sorted(stored.files) == sorted(res.maps())
+    for name, value in res.maps().items():
+        np.testing.assert_array_equal(stored[name], value)
+    assert os.listdir(tmp_path / 'sub') == ['maps.npz']
+
+
+def test_texel_maps_are_written_as_textures(tmp_path):
+    res = result(texture_shape=(2, 3))
+    res.base_color[0] = torch.tensor([1.3, -0.2, 0.5])  # clipped
+    paths = res.save(str(tmp_path / 'out'))
+    names = [os.path.basename(p) for p in paths]
+    assert names == ['maps.npz', 'base_color.png', 'metallic.png',
+                     'roughness.png', 'entropy.png']
+    maps = res.maps()
+    np.testing.assert_allclose(read_png(paths[1]),
+                               quantised(maps['base_color']), atol=1e-6)
+    for name, path in zip(('metallic', 'roughness'), paths[2:4]):
+        grey = np.repeat(maps[name][..., None], 3, -1)
+        np.testing.assert_allclose(read_png(path), quantised(grey),
+                                   atol=1e-6)
+    import matplotlib
+    turbo = matplotlib.colormaps[MAP_INFO['entropy']['cmap']]
+    np.testing.assert_allclose(read_png(paths[4]),
+                               quantised(turbo(maps['entropy'])[..., :3]),
+                               atol=1e-6)
+    assert sorted(os.listdir(tmp_path / 'out')) == sorted(names)
+
+
+def test_point_maps_are_drawn_from_above(tmp_path):
+    # a flat square of points with constant maps, seen by the default
+    # camera above it: the square in the middle, black outside its
+    # bounding circle
+    pos, face = grid_mesh(6)
+    res = SVBRDFResult(
+        base_color=torch.tensor([0.2, 0.4, 0.6]).repeat(36, 1),
+        metallic=torch.full((36, ), 0.75), roughness=torch.full((36, ), 0.3))
+    expected = {'base_color': quantised(np.array([0.2, 0.4, 0.6])),
+                'metallic': quantised(0.75), 'roughness': quantised(0.3)}
+    for label, extra in (('splats', {}), ('faces', {'face': face}),
+                         ('trimesh faces', {'face': face.t()})):
+        paths = res.save(str(tmp_path / label.replace(' ', '_')), pos=pos,
+                         image_size=(32, 40), **extra)
+        assert len(paths) == 4  # no entropy map
+        for name, path in zip(('base_color', 'metallic', 'roughness'),
+                              paths[1:]):
+            image = read_png(path)
+            assert image.shape == (32, 40, 3), label
+            hit = image.max(-1) > 0
+            assert hit[16, 20] and not hit[0, 0], label
+            np.testing.assert_allclose(
+                image[hit], np.broadcast_to(expected[name], image[hit].shape),
+                atol=1e-6, err_msg=label)
+
+
+def test_point_maps_need_positions(tmp_path):
+    with pytest.raises(ValueError, match="saving point maps as images needs "
+                                         "'pos'"):
+        result().save(str(tmp_path))

@@ -54,3 +54,74 @@ def test_a_mesh_folder_as_dataset(tmp_path, capsys):
     assert code == 0
     metrics = json.loads((tmp_path / 'run' / 'metrics.json').read_text())
     assert metrics['dataset'] == 'mesh_folder'
+
+
+@pytest.fixture
+def trained(monkeypatch):
+    """The arguments ``tg-intrinsic train`` hands to the library's train()
+    (which is not run)."""
+    import tg_intrinsic.train
+    calls = []
+    monkeypatch.setattr(tg_intrinsic.train, 'train', calls.append)
+    return calls
+
+
+@pytest.mark.parametrize('given,dataset', [
+    ('synthetic-modelnet', 'synthetic_modelnet'),
+    ('synthetic_modelnet', 'synthetic_modelnet'),  # the library's spelling
+    ('synthetic-shrec', 'synthetic_shrec'),
+])
+def test_the_synthetic_data_sets(capsys, trained, given, dataset):
+    code, _, err = run_cli(capsys, 'train', 'deltanet', '--dataset', given)
+    assert code == 0, err
+    (args, ) = trained
+    assert args.dataset == dataset and args.mesh_root is None
+    assert args.model == 'deltanet' and args.protocol == 'deltanet-modelnet40'
+    assert not hasattr(args, 'check') and not hasattr(args, 'run')
+
+
+def test_a_folder_is_a_mesh_folder_and_the_default_follows_the_model(
+        tmp_path, capsys, trained):
+    code, _, _ = run_cli(capsys, 'train', 'hsn', '--dataset', tmp_path)
+    assert code == 0
+    assert trained[-1].dataset == 'mesh_folder'
+    assert trained[-1].mesh_root == str(tmp_path)
+    assert trained[-1].protocol == 'hsn-shrec11'
+    code, _, _ = run_cli(capsys, 'train', 'hsn')
+    assert code == 0
+    assert (trained[-1].dataset, trained[-1].mesh_root) == \
+        ('synthetic_shrec', None)
+    code, _, _ = run_cli(capsys, 'train', 'deltanet', '--task',
+                         'segmentation', '--dataset', 'synthetic-shrec')
+    assert code == 0
+    assert (trained[-1].dataset, trained[-1].protocol) == \
+        ('synthetic_shrec', 'deltanet-shapenet-part')
+    # the documented default for deltanet is synthetic-modelnet, which has
+    # no part labels: said on one line, nothing trained
+    count = len(trained)
+    code, _, err = run_cli(capsys, 'train', 'deltanet', '--task',
+                           'segmentation')
+    assert_user_error(code, err, 'train', 'deltanet segmentation cannot '
+                      'train on synthetic_modelnet', 'synthetic_shrec')
+    assert len(trained) == count
+
+
+@pytest.mark.parametrize('argv,needles', [
+    (['deltanet', '--dataset', 'FILE'], ['FILE', 'neither',
+                                         'existing folder']),
+    (['deltanet', '--protocol', 'hsn-shrec11'],
+     ["protocol 'hsn-shrec11' trains hsn, not deltanet"]),
+    (['hsn', '--dataset', 'synthetic-modelnet'],
+     ['hsn classification cannot train on synthetic_modelnet']),
+    (['deltanet', '--scale', '2', '1'], ['--scale needs 0 < LOW <= HIGH']),
+    (['deltanet', '--max-angle', '270'], ['--max-angle', 'at most 180']),
+])
+def test_more_user_mistakes_end_in_one_line_before_any_work(
+        tmp_path, capsys, trained, argv, needles):
+    a_file = tmp_path / 'meshes.zip'
+    a_file.write_bytes(b'PK')
+    argv = [str(a_file) if a == 'FILE' else a for a in argv]
+    needles = [str(a_file) if n == 'FILE' else n for n in needles]
+    code, _, err = run_cli(capsys, 'train', *argv)
+    assert_user_error(code, err, 'train', *needles)
+    assert trained == []  # nothing was trained

@@ -55,17 +55,17 @@ def test_round_cone_is_the_distance_to_a_union_of_spheres():
     a, b = np.array([0.1, -0.2, 0.3]), np.array([0.9, 0.4, -0.1])
     ra, rb = 0.3, 0.15
     P = imp.cone(a, b, ra, rb, 1, 0.1)[None]
-    pts = rng.uniform(-1, 2, (1500, 3))
+    pts = rng.uniform(-1, 2, (500, 3))
     field = imp.eval_points(P, pts)
-    t = np.linspace(0, 1, 20001)
+    t = np.linspace(0, 1, 2001)
     centres = a + t[:, None] * (b - a)
     radius = ra + t * (rb - ra)
     union = (np.linalg.norm(pts[:, None] - centres[None], axis=2)
              - radius).min(1)
     assert np.array_equal(field > 0, union > 0)
     outside = field > 0
-    assert outside.sum() > 1000
-    assert np.abs(field[outside] - union[outside]).max() < 1e-6
+    assert outside.sum() > 300
+    assert np.abs(field[outside] - union[outside]).max() < 1e-5
     # equal radii: a capsule, exactly the distance to the segment minus r
     P = imp.cone(a, b, 0.2, 0.2, 1, 0.1)[None]
     s = np.clip((pts - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1)

@@ -1,5 +1,6 @@
 """The command line as a whole (tg_intrinsic.cli's entry point): help,
-dispatch, one-line user errors and --debug."""
+dispatch, how a failure ends (exit codes 2, 1, 130, one line), warnings
+on one line, and --debug."""
 import subprocess
 import sys
 
@@ -34,3 +35,47 @@ def test_debug_shows_the_traceback(capsys):
         main(['--debug', 'train', 'deltanet', '--dataset', 'missing'])
     with pytest.raises(ValueError, match='neither'):
         main(['train', 'deltanet', '--dataset', 'missing', '--debug'])
+
+
+@pytest.mark.parametrize('error,code,words', [
+    (FileNotFoundError("'x.obj' does not exist"), 2,
+     ["tg-intrinsic info: error: 'x.obj' does not exist"]),
+    (ValueError('first line\n  second line'), 2,
+     ['tg-intrinsic info: error: first line second line']),
+    (KeyboardInterrupt(), 130,
+     ['tg-intrinsic info: interrupted; outputs written so far are complete']),
+    (RuntimeError('boom'), 1,
+     ['tg-intrinsic info: unexpected RuntimeError: boom', '--debug',
+      'please report it']),
+])
+def test_how_a_failure_ends(capsys, monkeypatch, error, code, words):
+    from tg_intrinsic.cli import info
+
+    def fail(args):
+        raise error
+
+    monkeypatch.setattr(info, 'run', fail)
+    got, out, err = run_cli(capsys, 'info')
+    assert got == code and out == ''
+    assert len(err.strip().splitlines()) == 1 and 'Traceback' not in err
+    for word in words:
+        assert word in err
+    with pytest.raises(type(error)):
+        main(['info', '--debug'])
+
+
+def test_warnings_are_one_line_unless_debugging(capsys, monkeypatch):
+    import warnings
+    from tg_intrinsic.cli import info
+
+    def warn(args):
+        warnings.warn('the solver did not\n converge', RuntimeWarning)
+        return 0
+
+    monkeypatch.setattr(info, 'run', warn)
+    code, _, err = run_cli(capsys, 'info')
+    assert code == 0
+    assert err == 'tg-intrinsic: warning: the solver did not converge\n'
+    with pytest.warns(RuntimeWarning, match='did not'):
+        assert main(['info', '--debug']) == 0
+    assert warnings.showwarning.__module__ != 'tg_intrinsic.cli'  # restored

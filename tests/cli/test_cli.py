@@ -1,7 +1,6 @@
-"""The command line as a whole: help, dispatch, one-line user errors,
---debug, info, and the train sub-command."""
-import csv
-import json
+"""The command line as a whole (tg_intrinsic.cli's entry point): help,
+dispatch, how a failure ends (exit codes 2, 1, 130, one line), warnings
+on one line, and --debug."""
 import subprocess
 import sys
 
@@ -9,7 +8,7 @@ import pytest
 
 from tg_intrinsic.cli import COMMANDS, main
 
-from tests.cli import assert_user_error, run_cli
+from tests.cli import run_cli
 
 
 @pytest.mark.parametrize('command', COMMANDS)
@@ -31,66 +30,52 @@ def test_python_dash_m_and_no_command():
     assert "invalid choice: 'nope'" in result.stderr
 
 
-def test_info(capsys):
-    code, out, _ = run_cli(capsys, 'info')
-    assert code == 0
-    for name in ('torch', 'torch_geometric', 'tg_intrinsic', 'device',
-                 'potpourri3d', 'OpenEXR', 'mitsuba', 'torch_scatter'):
-        assert name in out
-    code, out, _ = run_cli(capsys, 'info', '--json')
-    info = json.loads(out)
-    assert code == 0 and set(info['extras']) == {
-        'potpourri3d', 'OpenEXR', 'mitsuba', 'torch_scatter'}
-
-
-@pytest.mark.parametrize('argv,needles', [
-    (['train', 'deltanet', '--epochs', '-3'], ['--epochs', 'at least 1']),
-    (['train', 'deltanet', '--lr', '0'], ['--lr', 'positive']),
-    (['train', 'deltanet', '--dataset', 'no/such/folder'],
-     ['no/such/folder', 'existing folder']),
-    (['train', 'resnet'], ["invalid choice: 'resnet'"]),
-    (['train', 'deltanet', '--epochs', 'many'], ['--epochs', 'many']),
-])
-def test_train_user_mistakes_end_in_one_line(capsys, argv, needles):
-    code, _, err = run_cli(capsys, *argv)
-    assert_user_error(code, err, 'train', *needles)
-
-
-def test_train_writes_metrics_csv_and_curves(tmp_path, capsys):
-    code = main(['train', 'deltanet', '--dataset', 'synthetic-modelnet',
-                 '--root', str(tmp_path / 'data'), '--out',
-                 str(tmp_path / 'run'), '--num-points', '64',
-                 '--shapes-per-class', '2', '--batch-size', '8',
-                 '--conv-channels', '8', '--k', '6', '--epochs', '2',
-                 '--eval-every', '2', '--quiet'])
-    assert code == 0
-    rows = list(csv.DictReader(open(tmp_path / 'run' / 'metrics.csv')))
-    assert [int(r['epoch']) for r in rows] == [1, 2]
-    assert rows[0]['test_accuracy'] == '' and 0 <= float(
-        rows[1]['test_accuracy']) <= 1
-    assert (tmp_path / 'run' / 'learning_curve.png').stat().st_size > 0
-
-
-def test_a_mesh_folder_as_dataset(tmp_path, capsys):
-    import trimesh
-    for name, scale in (('ball', (1, 1, 1)), ('cigar', (3, 1, 1))):
-        for split in ('train', 'test'):
-            folder = tmp_path / 'meshes' / name / split
-            folder.mkdir(parents=True)
-            mesh = trimesh.creation.icosphere(1)
-            mesh.apply_scale(scale)
-            mesh.export(folder / f'{name}.off')
-    code = main(['train', 'deltanet', '--dataset', str(tmp_path / 'meshes'),
-                 '--out', str(tmp_path / 'run'), '--num-points', '64',
-                 '--batch-size', '2', '--conv-channels', '8', '--k', '6',
-                 '--epochs', '1', '--quiet'])
-    assert code == 0
-    metrics = json.loads((tmp_path / 'run' / 'metrics.json').read_text())
-    assert metrics['dataset'] == 'mesh_folder'
-
-
 def test_debug_shows_the_traceback(capsys):
     with pytest.raises(ValueError, match='neither'):
         main(['--debug', 'train', 'deltanet', '--dataset', 'missing'])
     with pytest.raises(ValueError, match='neither'):
         main(['train', 'deltanet', '--dataset', 'missing', '--debug'])
+
+
+@pytest.mark.parametrize('error,code,words', [
+    (FileNotFoundError("'x.obj' does not exist"), 2,
+     ["tg-intrinsic info: error: 'x.obj' does not exist"]),
+    (ValueError('first line\n  second line'), 2,
+     ['tg-intrinsic info: error: first line second line']),
+    (KeyboardInterrupt(), 130,
+     ['tg-intrinsic info: interrupted; outputs written so far are complete']),
+    (RuntimeError('boom'), 1,
+     ['tg-intrinsic info: unexpected RuntimeError: boom', '--debug',
+      'please report it']),
+])
+def test_how_a_failure_ends(capsys, monkeypatch, error, code, words):
+    from tg_intrinsic.cli import info
+
+    def fail(args):
+        raise error
+
+    monkeypatch.setattr(info, 'run', fail)
+    got, out, err = run_cli(capsys, 'info')
+    assert got == code and out == ''
+    assert len(err.strip().splitlines()) == 1 and 'Traceback' not in err
+    for word in words:
+        assert word in err
+    with pytest.raises(type(error)):
+        main(['info', '--debug'])
+
+
+def test_warnings_are_one_line_unless_debugging(capsys, monkeypatch):
+    import warnings
+    from tg_intrinsic.cli import info
+
+    def warn(args):
+        warnings.warn('the solver did not\n converge', RuntimeWarning)
+        return 0
+
+    monkeypatch.setattr(info, 'run', warn)
+    code, _, err = run_cli(capsys, 'info')
+    assert code == 0
+    assert err == 'tg-intrinsic: warning: the solver did not converge\n'
+    with pytest.warns(RuntimeWarning, match='did not'):
+        assert main(['info', '--debug']) == 0
+    assert warnings.showwarning.__module__ != 'tg_intrinsic.cli'  # restored

@@ -9,6 +9,9 @@ from .scanobjectnn import ScanObjectNN
 from .shapenet_part_normal import ShapeNetPartNormal
 
 POINT_EXTENSIONS = ('.txt', '.xyz', '.npy', '.pts')
+# Formats that hold meshes only (.ply holds meshes or point clouds).
+MESH_ONLY_EXTENSIONS = ('.obj', '.off')
+MESH_EXTENSIONS = MESH_ONLY_EXTENSIONS + ('.ply', )
 LAYOUTS = ('ModelNet40 resampled (modelnet40_shape_names.txt), ShapeNet-Part '
            '(synsetoffset2category.txt), ScanObjectNN (h5_files/main_split), '
            'meshes <class>/<train|test>/*.obj|off|ply or MeshCNN '
@@ -18,17 +21,25 @@ LAYOUTS = ('ModelNet40 resampled (modelnet40_shape_names.txt), ShapeNet-Part '
 
 def _has_point_files(root: str) -> bool:
     """Whether the split folders (``<class>/<split>/`` or ``<split>/``)
-    hold point files; other files (a README.txt) do not count."""
+    hold point files and no ``.obj`` or ``.off`` meshes; other files (a
+    README.txt) do not count, nor does a file named like a mesh beside it
+    (``a.txt`` beside ``a.ply``: MeshFolder's per-vertex labels)."""
     splits = ('train', 'test')
     folders = [osp.join(root, s) for s in splits]
     for name in os.listdir(root):
         folders += [osp.join(root, name, s) for s in splits]
+    found = False
     for folder in folders:
-        if osp.isdir(folder) and any(
-                osp.splitext(f)[1].lower() in POINT_EXTENSIONS
-                for f in os.listdir(folder)):
-            return True
-    return False
+        if not osp.isdir(folder):
+            continue
+        names = [osp.splitext(f) for f in os.listdir(folder)]
+        if any(ext.lower() in MESH_ONLY_EXTENSIONS for _, ext in names):
+            return False
+        meshes = {stem for stem, ext in names
+                  if ext.lower() in MESH_EXTENSIONS}
+        found = found or any(ext.lower() in POINT_EXTENSIONS
+                             and stem not in meshes for stem, ext in names)
+    return found
 
 
 def open_folder(root: str, split: str, task: str = 'classification',
@@ -43,8 +54,10 @@ def open_folder(root: str, split: str, task: str = 'classification',
       (training on :obj:`"trainval"`, as the papers do);
     * :obj:`h5_files/`, :obj:`main_split/` or :obj:`main_split_nobg/`:
       :class:`ScanObjectNN` (:obj:`variant`);
-    * point files (:obj:`.txt`, :obj:`.xyz`, :obj:`.npy`, :obj:`.pts`):
-      :class:`PointCloudFolder`; otherwise :class:`MeshFolder`.
+    * point files (:obj:`.txt`, :obj:`.xyz`, :obj:`.npy`, :obj:`.pts`)
+      and no :obj:`.obj` or :obj:`.off` meshes: :class:`PointCloudFolder`;
+      otherwise :class:`MeshFolder` (a :obj:`.txt` or :obj:`.npy` file
+      named like a mesh beside it holds that mesh's labels).
 
     Raises:
         ValueError: if :obj:`root` is not a folder, or from the reader,

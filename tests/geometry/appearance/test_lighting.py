@@ -1,7 +1,7 @@
 """The renderer against brute-force quadrature of the reflection integral,
 analytic answers (constant environment, white furnace by an independent 2D
-quadrature), rotation symmetry; rendered images; bad input. The
-rasteriser's own tests are in test_raster.py."""
+quadrature), rotation symmetry; bad input. The rasteriser's own tests
+are in test_raster.py, rendered images in tests/datasets/test_capture.py."""
 import math
 
 import numpy as np
@@ -9,18 +9,16 @@ import pytest
 import torch
 from numba import njit
 
-from tg_intrinsic.datasets.capture import render_images
 from tg_intrinsic.geometry.appearance import lighting
 from tg_intrinsic.geometry.appearance.envmap import (equirect_directions,
                                                      equirect_lookup,
                                                      equirect_solid_angles)
 from tg_intrinsic.geometry.appearance.lighting import render_radiance
-from tg_intrinsic.geometry.appearance.raster import rasterize
 from tg_intrinsic.geometry.appearance.sh import (
     principled_to_torrance_sparrow, schlick_fresnel, smith_g1)
 
-from tests.geometry.appearance.scenes import (D64, camera, material,
-                                              sky_with_sun, unit)
+from tests.geometry.appearance.scenes import (D64, material, sky_with_sun,
+                                              unit)
 
 
 @njit(cache=True)
@@ -210,32 +208,6 @@ def test_render_radiance_bad_input():
         render_radiance(n, bc[:, :2], m, r, wo, env)
     with pytest.raises(ValueError, match='specular_samples'):
         render_radiance(n, bc, m, r, wo, env, specular_samples=0)
-
-
-# ---------------------------------------------------------- rasteriser
-
-
-def test_render_images_background_and_bad_input():
-    import trimesh
-    ico = trimesh.creation.icosphere(subdivisions=2)
-    V = torch.tensor(ico.vertices, dtype=D64)
-    F = torch.tensor(ico.faces).t().contiguous()
-    n = V.clone()
-    K, E = camera([0.0, -3.0, 0.5], focal=25.0, size=(24, 24))
-    K2, E2 = camera([0.0, 3.0, 0.0], target=(0.0, 6.0, 0.0), size=(24, 24))
-    env = sky_with_sun(16, 32)
-    bc, m, r = material(len(V), 0.0, 0.6)
-    img = render_images(V, F, n, bc, m, r, torch.stack([K, K2]),
-                        torch.stack([E, E2]), 24, 24, env)
-    assert img.shape == (2, 24, 24, 3) and img.dtype == torch.float32
-    face_id, _, _ = rasterize(V, F, K, E, 24, 24)
-    assert bool((img[0][face_id < 0] == 0).all())
-    assert bool((img[0][face_id >= 0].sum(-1) > 0).float().mean() > 0.95)
-    assert bool((img[1] == 0).all())  # looks away: an empty image
-    with pytest.raises(ValueError, match='extrinsics'):
-        bad = E.clone()
-        bad[:, :3] *= 2
-        render_images(V, F, n, bc, m, r, K[None], bad[None], 24, 24, env)
 
 
 def test_kernel_smith_g1_is_the_appearance_packages():

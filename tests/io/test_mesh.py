@@ -1,0 +1,328 @@
+"""Meshes on disk: the OFF parser (ModelNet's malformed headers, COFF,
+polygons), the trimesh-backed OBJ/PLY/STL reader, the binary PLY writer,
+per-vertex signals, and the errors that name the file and the problem."""
+import os
+
+import numpy as np
+import pytest
+import trimesh
+
+from tg_intrinsic.io import mesh as mf
+
+TET_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.5]])
+TET_F = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+
+
+def write_off(path, V, F, header='OFF\n{nv} {nf} 0\n', comment=True):
+    with open(path, 'w') as f:
+        f.write(header.format(nv=len(V), nf=len(F)))
+        if comment:
+            f.write('# a comment line\n')
+        for v in V:
+            f.write(' '.join(f'{x:.6f}' for x in v) + '\n')
+        for face in F:
+            f.write(f'{len(face)} ' + ' '.join(str(i) for i in face) + '\n')
+
+
+def test_malformed_off_header(tmp_path):
+    path = tmp_path / 'm.off'
+    write_off(path, TET_V, TET_F, header='OFF{nv} {nf} 0\n', comment=False)
+    assert path.read_text().startswith('OFF4 4 0\n')
+    pos, face = mf.read_off(str(path))
+    assert np.allclose(pos, TET_V) and np.array_equal(face, TET_F)
+    # COFF with colour columns, counts on the header line too
+    path2 = tmp_path / 'c.off'
+    with open(path2, 'w') as f:
+        f.write('COFF 4 4 0\n')
+        for v in TET_V:
+            f.write(' '.join(map(str, v)) + ' 255 0 0 255\n')
+        for t in TET_F:
+            f.write('3 ' + ' '.join(map(str, t)) + ' 0 255 0\n')
+    pos, face = mf.read_off(str(path2))
+    assert np.allclose(pos, TET_V) and np.array_equal(face, TET_F)
+
+
+TET_OBJ = 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1.5\n'
+
+# (file name, text, what the error says), shared with MeshFolder's test
+REPEATED_VERTEX = [
+    # the OBJ line 'f 1 1 2' uses vertex 1 twice
+    ('a.obj', TET_OBJ + 'f 1 3 2\nf 1 1 2\nf 2 3 4\n',
+     r"triangle 1, vertices \[0, 0, 1\] counted from 0, from line 6: "
+     r"'f 1 1 2'"),
+    # negative (relative) OBJ indices
+    ('b.obj', TET_OBJ + 'f 1 3 2\nf -1 2 -1\n',
+     r"triangle 1, vertices \[3, 1, 3\] counted from 0, from line 6: "
+     r"'f -1 2 -1'"),
+    # a quad with a repeated corner, in an OFF file with a comment
+    ('c.off', 'OFF\n# comment\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n'
+              '3 0 2 1\n4 0 1 1 3\n',
+     r"1 triangle\(s\) that repeat a vertex \(first: triangle 1, vertices "
+     r"\[0, 1, 1\] counted from 0, from line 9: '4 0 1 1 3'"),
+]
+
+
+@pytest.mark.parametrize('name,text,match', REPEATED_VERTEX)
+def test_faces_repeating_a_vertex_name_file_and_face(tmp_path, name, text,
+                                                     match):
+    # The reader rejects such faces as it rejects indices out of range
+    # (documented), naming the file and the face, and says what to do.
+    path = tmp_path / name
+    path.write_text(text)
+    with pytest.raises(ValueError, match=match) as info:
+        mf.read_mesh(str(path))
+    message = str(info.value)
+    assert str(path) in message and 'repeat a vertex' in message
+    assert 'Delete these faces' in message and 'nondegenerate_faces' in \
+        message
+
+
+def test_ply_face_repeating_a_vertex_is_named(tmp_path):
+    # no line numbers in a binary file: the triangle index
+    path = tmp_path / 'p.ply'
+    face = TET_F.copy()
+    face[2] = [1, 3, 3]
+    mf.write_ply(str(path), TET_V, face)
+    with pytest.raises(ValueError, match=r"p\.ply' has 1 triangle\(s\) that "
+                       r"repeat a vertex \(first: triangle 2, vertices "
+                       r"\[1, 3, 3\] counted from 0\); such"):
+        mf.read_mesh(str(path))
+    # zero-area triangles with three distinct corners are still read
+    flat = TET_V.copy()
+    flat[3] = [0.5, 0.5, 0]  # on the line between vertices 1 and 2
+    mf.write_ply(str(path), flat, TET_F)
+    assert mf.read_mesh(str(path))[1].shape == (4, 3)
+
+
+# --- reading against trimesh's geometry ---------------------------------
+
+
+def icosphere():
+    m = trimesh.creation.icosphere(subdivisions=1)  # 42 v, 80 f
+    return np.asarray(m.vertices), np.asarray(m.faces)
+
+
+@pytest.mark.parametrize('ext', ['obj', 'off', 'ply', 'stl'])
+def test_every_format_gives_the_triangles_it_stores(tmp_path, ext):
+    V, F = icosphere()
+    path = tmp_path / f'ball.{ext}'
+    trimesh.Trimesh(V, F, process=False).export(path)
+    pos, face = mf.read_mesh(str(path))
+    assert pos.dtype == np.float64 and face.dtype == np.int64
+    assert face.shape == F.shape
+    # the same triangles, corner by corner (PLY and STL store float32)
+    assert np.abs(pos[face] - V[F]).max() < 1e-6
+    if ext != 'stl':  # STL stores a triangle soup: 3 vertices per face
+        assert len(pos) == len(V) and np.array_equal(face, F)
+    else:
+        assert len(pos) == 3 * len(F)
+
+
+def test_polygons_become_triangle_fans(tmp_path):
+    pentagon = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
+                         [-0.5, 0.5, 0]])
+    fans = [[0, 1, 2], [0, 2, 3], [0, 3, 4]]
+    off = tmp_path / 'p.off'
+    write_off(off, pentagon, [[0, 1, 2, 3, 4]])
+    assert mf.read_mesh(str(off))[1].tolist() == fans
+    obj = tmp_path / 'p.obj'
+    obj.write_text(''.join(f'v {x} {y} {z}\n' for x, y, z in pentagon)
+                   + 'f 1 2 3 4 5\n')
+    pos, face = mf.read_mesh(str(obj))
+    # whatever the triangulation, it covers the pentagon once (area 1.25)
+    area = 0.5 * np.linalg.norm(np.cross(pos[face[:, 1]] - pos[face[:, 0]],
+                                         pos[face[:, 2]] - pos[face[:, 0]]),
+                                axis=1)
+    assert face.shape == (3, 3) and area.sum() == pytest.approx(1.25)
+
+
+def test_point_clouds_have_no_faces(tmp_path):
+    points = tmp_path / 'c.off'
+    points.write_text('OFF\n3 0 0\n0 0 0\n1 0 0\n1 1 0\n')
+    pos, face, props = mf.read_surface(str(points))
+    assert pos.tolist() == [[0, 0, 0], [1, 0, 0], [1, 1, 0]]
+    assert face is None and props == {}
+    obj = tmp_path / 'c.obj'
+    obj.write_text('v 0 0 0\nv 1 0 0\nv 1 1 0\n')
+    assert mf.read_surface(str(obj))[1] is None
+    with pytest.raises(ValueError, match=r"c\.obj' holds a point cloud, not "
+                       r"a triangle mesh"):
+        mf.read_mesh(str(obj))
+
+
+# --- the PLY writer ------------------------------------------------------
+
+
+def test_write_ply_round_trips_positions_faces_and_properties(tmp_path):
+    rng = np.random.default_rng(0)
+    V, F = icosphere()
+    V = V + 1e-3 * rng.standard_normal(V.shape)  # full float64 digits
+    heat, feat = rng.random(len(V)), rng.standard_normal((len(V), 2))
+    colors = rng.random((len(V), 3))
+    colors[0] = [np.nan, -0.5, 1.5]  # clipped, NaN as 0
+    path = tmp_path / 'out.ply'
+    assert mf.write_ply(str(path), V, F, properties={'heat': heat,
+                                                     'feat': feat},
+                        colors=colors) == str(path)
+    pos, face, props = mf.read_surface(str(path))
+    assert np.array_equal(pos, V) and np.array_equal(face, F)
+    assert sorted(props) == ['blue', 'feat_0', 'feat_1', 'green', 'heat',
+                             'red']
+    assert np.array_equal(props['heat'], heat)
+    assert np.array_equal(np.stack([props['feat_0'], props['feat_1']], 1),
+                          feat)
+    rgb = np.stack([props[c] for c in ('red', 'green', 'blue')], 1)
+    assert rgb.dtype == np.uint8
+    assert rgb[0].tolist() == [0, 0, 255]
+    assert np.array_equal(rgb[1:], np.round(colors[1:] * 255))
+    # trimesh, MeshLab and friends read the same file
+    loaded = trimesh.load(path, process=False)
+    assert np.array_equal(loaded.vertices, V)
+    assert np.array_equal(loaded.faces, F)
+
+
+def test_write_ply_is_binary_little_endian_with_the_documented_layout(
+        tmp_path):
+    V, F = icosphere()
+    path = tmp_path / 'out.ply'
+    mf.write_ply(str(path), V, F, properties={'q': np.arange(len(V))},
+                 colors=np.zeros((len(V), 3)))
+    data = path.read_bytes()
+    end = data.index(b'end_header\n') + len(b'end_header\n')
+    header = data[:end].decode('ascii').splitlines()
+    assert header == [
+        'ply', 'format binary_little_endian 1.0',
+        'comment written by tg_intrinsic', f'element vertex {len(V)}',
+        'property double x', 'property double y', 'property double z',
+        'property uchar red', 'property uchar green', 'property uchar blue',
+        'property double q', f'element face {len(F)}',
+        'property list uchar int vertex_indices', 'end_header']
+    # 3 doubles, 3 bytes, 1 double per vertex; count byte + 3 int32 per face
+    assert len(data) - end == len(V) * (24 + 3 + 8) + len(F) * (1 + 12)
+    first = np.frombuffer(data[end:end + 24], dtype='<f8')
+    assert np.array_equal(first, V[0])
+    # points only: no face element
+    mf.write_ply(str(path), V)
+    assert b'element face' not in path.read_bytes()
+    assert mf.read_surface(str(path))[1] is None
+    assert [n for n in os.listdir(tmp_path) if n != 'out.ply'] == []
+
+
+# --- errors that name the file and the problem ----------------------------
+
+
+def test_missing_folder_and_unknown_format(tmp_path):
+    with pytest.raises(FileNotFoundError, match=r"nope\.obj' does not "
+                       r"exist"):
+        mf.read_surface(str(tmp_path / 'nope.obj'))
+    with pytest.raises(ValueError, match=r"is a folder; give a mesh or point "
+                       r"cloud file \(\.obj/\.off/\.ply/\.stl\)"):
+        mf.read_surface(str(tmp_path))
+    for name, ext in (('scan.xyz', "'.xyz'"), ('mesh', "'(none)'")):
+        (tmp_path / name).write_text('0 0 0\n')
+        with pytest.raises(ValueError) as info:
+            mf.read_surface(str(tmp_path / name))
+        assert f'unknown format {ext}; use one of .obj/.off/.ply/.stl' in \
+            str(info.value) and name in str(info.value)
+
+
+OFF_TRIANGLE = 'OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n'
+
+
+@pytest.mark.parametrize('text,problem', [
+    ('', 'empty file'),
+    ('# only a comment\n', 'empty file'),
+    ('PLY\n3 1 0\n', "missing 'OFF' header (first line: 'PLY')"),
+    ('OFF\n', 'the OFF header has no vertex and face counts'),
+    ('OFF\nthree one\n', 'malformed OFF header'),
+    ('OFF\n8 12 0\n0 0 0\n', 'announces 8 vertices and 12 faces but the '
+                            'file has only 1 data lines'),
+    ('OFF\n2 0 0\n0 0\n1 1\n', 'every vertex line needs 3 coordinates'),
+    ('OFF\n3 1 0\n0 0 0\n1 0\n0 1 0\n3 0 1 2\n', 'malformed vertex line'),
+    ('OFF\n3 1 0\n0 0 0\n1 x 0\n0 1 0\n3 0 1 2\n', 'malformed vertex line'),
+    (OFF_TRIANGLE + '2 0 1\n', "malformed face line '2 0 1'"),
+    (OFF_TRIANGLE + '3 0 1 x\n', 'malformed face line'),
+    (OFF_TRIANGLE + '4 0 1 2\n', "malformed face line '4 0 1 2'"),
+    (OFF_TRIANGLE + '3 0 1 3\n', 'face indices outside [0, 2] (the vertex '
+                                 'count is 3)'),
+    (OFF_TRIANGLE + '3 0 1 -1\n', 'face indices outside [0, 2]'),
+    ('OFF\n3 1 0\n0 0 nan\n1 0 0\n0 1 0\n3 0 1 2\n',
+     'NaN or infinite coordinates at 1 vertex(es)'),
+    ('OFF\n3 1 0\ninf 0 0\n1 0 -inf\n0 1 0\n3 0 1 2\n',
+     'NaN or infinite coordinates at 2 vertex(es)'),
+])
+def test_a_bad_off_file_is_named_with_its_problem(tmp_path, text, problem):
+    path = tmp_path / 'bad.off'
+    path.write_text(text)
+    with pytest.raises(ValueError) as info:
+        mf.read_surface(str(path))
+    message = str(info.value)
+    assert str(path) in message and problem in message, message
+
+
+@pytest.mark.parametrize('name,content', [
+    ('a.stl', b'not an stl file at all'),
+    ('b.obj', b''),
+    ('c.ply', b'ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\n'
+              b'end_header\n0\n1\n'),
+    ('d.obj', b'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n'),
+])
+def test_a_bad_file_of_another_format_is_named(tmp_path, name, content):
+    (tmp_path / name).write_bytes(content)
+    with pytest.raises(ValueError) as info:
+        mf.read_surface(str(tmp_path / name))
+    assert name in str(info.value)
+
+
+# --- per-vertex signals ----------------------------------------------------
+
+
+def test_signals_from_every_source(tmp_path):
+    rng = np.random.default_rng(1)
+    one, two = rng.random(4), rng.standard_normal((4, 2))
+    np.save(tmp_path / 's.npy', two)
+    np.savetxt(tmp_path / 's.txt', one)
+    np.savetxt(tmp_path / 's.csv', two, delimiter=',')
+    mf.write_ply(str(tmp_path / 'm.ply'), TET_V, TET_F,
+                 properties={'heat': one})
+    assert np.array_equal(mf.read_signal(str(tmp_path / 's.npy'), 4), two)
+    assert np.allclose(mf.read_signal(str(tmp_path / 's.txt'), 4), one,
+                       rtol=1e-15)
+    assert np.allclose(mf.read_signal(str(tmp_path / 's.csv'), 4), two,
+                       rtol=1e-15)
+    assert np.array_equal(
+        mf.read_signal(str(tmp_path / 'm.ply') + ':heat', 4), one)
+    _, _, props = mf.read_surface(str(tmp_path / 'm.ply'))
+    signal = mf.read_signal('heat', 4, props)
+    assert signal.dtype == np.float64 and np.array_equal(signal, one)
+    np.save(tmp_path / 'i.npy', np.arange(4, dtype=np.int32))
+    assert mf.read_signal(str(tmp_path / 'i.npy'), 4).dtype == np.float64
+
+
+def test_bad_signals_say_what_is_wrong(tmp_path):
+    mf.write_ply(str(tmp_path / 'm.ply'), TET_V, TET_F,
+                 properties={'heat': np.zeros(4)})
+    np.save(tmp_path / 'five.npy', np.zeros(5))
+    np.save(tmp_path / 'cube.npy', np.zeros((4, 2, 2)))
+    np.save(tmp_path / 'words.npy', np.array(['a', 'b', 'c', 'd']))
+    np.save(tmp_path / 'nan.npy', np.array([0, 1, np.nan, 2]))
+    (tmp_path / 'bad.txt').write_text('1\n2\nthree\n4\n')
+    cases = [
+        (str(tmp_path / 'five.npy'), r"has shape \(5,\) but the surface has "
+                                     r"4 vertices; give one row per vertex"),
+        (str(tmp_path / 'cube.npy'), r"has shape \(4, 2, 2\)"),
+        (str(tmp_path / 'words.npy'), r"is not numeric \(<U1\)"),
+        (str(tmp_path / 'nan.npy'), 'holds NaN or infinite values'),
+        (str(tmp_path / 'bad.txt'), r"could not read the signal '.*bad\.txt'"),
+        (str(tmp_path / 'm.ply') + ':cold',
+         r"m\.ply' has no vertex property 'cold'; it has \['heat'\]"),
+        ('cold', r"signal 'cold' is neither a \.npy/\.txt/\.csv file, "
+                 r"FILE\.ply:PROPERTY, nor a vertex property of the input "
+                 r"\(it has none\)"),
+    ]
+    for source, match in cases:
+        with pytest.raises(ValueError, match=match):
+            mf.read_signal(source, 4)
+    with pytest.raises(FileNotFoundError, match=r"signal file '.*gone\.npy' "
+                       r"does not exist"):
+        mf.read_signal(str(tmp_path / 'gone.npy'), 4)

@@ -246,3 +246,15 @@ def test_prolongation():
             C.check_prolongation(*args, args[0].size(0), 'fine', other=2)
     with pytest.raises(ValueError, match=r'coarse points \(num_coarse\)'):
         C.check_prolongation(x, index, weight, 4, 'fine', other=1)
+
+
+def test_vector_features():
+    v = torch.zeros(4, 3, 2, dtype=D64)
+    assert C.check_vector_features(v, 'v', 3) is v
+    assert C.check_vector_features(v, 'v', 3, num=4) is v
+    for value, channels, num in [(v[..., :1], 3, None), (v, 2, None),
+                                 (v.long(), 3, None), (v[:3], 3, 4),
+                                 (v.view(4, 6), 3, None)]:
+        with pytest.raises(ValueError, match=r"'v' must be float tangent "
+                                             r"vector features"):
+            C.check_vector_features(value, 'v', channels, num)

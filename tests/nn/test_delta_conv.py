@@ -130,7 +130,8 @@ def test_delta_conv_explains_missing_or_mismatched_inputs(monkeypatch):
          "SurfaceOperators"),
         (lambda: conv(x[:40], v[:40], ei, ops),
          "'x' has 40 rows but there are 60 nodes in 'operators'"),
-        (lambda: conv(x, v[:, :2], ei, ops), r"'v' must be vector features"),
+        (lambda: conv(x, v[:, :2], ei, ops),
+         r"'v' must be float tangent vector features \[60, 3, 2\]"),
         (lambda: conv(x[:, :2], v, ei, ops), r"'x' must be float scalar "
                                              r"features \[N, 3\]"),
         (lambda: conv(x, v, ei.clone() + 1, ops),

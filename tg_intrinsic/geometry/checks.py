@@ -273,6 +273,22 @@ def check_streams(z, name: str = 'x') -> Tensor:
     return z
 
 
+def check_vector_features(v, name: str, channels: int,
+                          num: Optional[int] = None) -> Tensor:
+    """Float tangent vector features ``[N, channels, 2]`` (``N = num`` if
+    given), checked before layers view them as planes, which would
+    silently accept a wrong last dimension."""
+    v = check_tensor(v, name)
+    rows = 'N' if num is None else num
+    if v.dim() != 3 or v.size(1) != channels or v.size(2) != 2 \
+            or (num is not None and v.size(0) != num) \
+            or not v.is_floating_point():
+        raise ValueError(f"'{name}' must be float tangent vector features "
+                         f"[{rows}, {channels}, 2], got {v.dtype} of shape "
+                         f"{list(v.shape)}")
+    return v
+
+
 def check_float_tensor(value, name: str, shape: Sequence[int]) -> Tensor:
     """A finite floating-point tensor of exactly ``shape``."""
     value = check_tensor(value, name)

@@ -7,7 +7,7 @@ from torch_geometric.nn import MLP, MessagePassing
 
 from tg_intrinsic.geometry.checks import (check_edge_index,
                                           check_positive_int, check_rows,
-                                          check_tensor)
+                                          check_tensor, check_vector_features)
 from tg_intrinsic.geometry.pointcloud.operators import (SurfaceOperators,
                                                         interleaved, planar,
                                                         vector_norm)
@@ -195,11 +195,7 @@ class DeltaConv(MessagePassing):
                                  f"use v = operators.grad(x) (as DeltaNet "
                                  f"does), or build the layer with "
                                  f"vector=False, vector_input=False")
-            v = check_tensor(v, 'v')
-            if tuple(v.shape) != (x.size(0), self.in_channels, 2):
-                raise ValueError(f"'v' must be vector features [N, C_in, 2] "
-                                 f"= {[x.size(0), self.in_channels, 2]}, got "
-                                 f"{list(v.shape)}")
+            check_vector_features(v, 'v', self.in_channels, x.size(0))
         if operators is None or edge_index is not operators.source_edge_index:
             # The operators checked their own graph when they were built.
             check_edge_index(edge_index, x.size(0), x,

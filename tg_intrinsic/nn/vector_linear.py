@@ -3,21 +3,9 @@ import math
 import torch
 from torch import Tensor
 
-from tg_intrinsic.geometry.checks import check_positive_int, check_tensor
+from tg_intrinsic.geometry.checks import (check_positive_int,
+                                          check_vector_features)
 from tg_intrinsic.geometry.pointcloud.operators import interleaved, planar
-
-
-def check_vector_features(v, name: str, channels: int) -> Tensor:
-    """Float tangent vector features ``[N, channels, 2]``; checked before
-    the layers view them as planes (which would silently accept a wrong
-    last dimension)."""
-    v = check_tensor(v, name)
-    if v.dim() != 3 or v.size(1) != channels or v.size(2) != 2 \
-            or not v.is_floating_point():
-        raise ValueError(f"'{name}' must be float tangent vector features "
-                         f"[N, {channels}, 2], got {v.dtype} of shape "
-                         f"{list(v.shape)}")
-    return v
 
 
 class VectorLinear(torch.nn.Module):

@@ -1,10 +1,10 @@
 import torch
 from torch import Tensor
 
-from tg_intrinsic.geometry.checks import check_positive_int
+from tg_intrinsic.geometry.checks import (check_positive_int,
+                                          check_vector_features)
 from tg_intrinsic.geometry.pointcloud.operators import (interleaved, planar,
                                                         vector_norm)
-from tg_intrinsic.nn.vector_linear import check_vector_features
 
 
 class VectorNonLin(torch.nn.Module):

@@ -84,6 +84,53 @@ def test_forward_shapes_gradients_and_options():
     assert float(model.total_variation(edges)) < before
 
 
+@pytest.mark.parametrize('model', ['eq5.11', 'split_sum'])
+def test_levenberg_marquardt_recovers_its_own_model(model):
+    data, (base, metallic, roughness) = self_consistent_data(150, 100)
+    if model == 'split_sum':  # observations of the split-sum model
+        truth = FrequencySVBRDF(150, specular_model=model)
+        with torch.no_grad():
+            truth.base_color.copy_(base)
+            truth.metallic.copy_(metallic)
+            truth.roughness.copy_(roughness)
+            radiance = truth(data)
+        data.obs_radiance = torch.where(data.obs_mask.unsqueeze(-1),
+                                        radiance, torch.zeros_like(radiance))
+        data = FitSphericalHarmonics()(data)
+    fitted = FrequencySVBRDF(data.num_nodes, specular_model=model)
+    result = fitted.fit(data, solver='lm', progress=False)
+    assert result.loss[-1] < 0.05 * result.loss[0]
+    assert (result.roughness - roughness).abs().mean() < 0.01
+    assert ((result.base_color - base) ** 2).mean().sqrt() < 0.01
+    assert (result.metallic - metallic).abs().mean() < 0.02
+    # a lower objective than Adam's in its default budget
+    adam = FrequencySVBRDF(data.num_nodes, specular_model=model).fit(
+        data, lr=0.02, progress=False)
+    assert result.loss[-1] < adam.loss[-1]
+    # a known metallic is held
+    held = FrequencySVBRDF(data.num_nodes, specular_model=model).fit(
+        data, solver='lm', metallic=1.0, progress=False)
+    assert bool((held.metallic == 1).all())
+    assert ((held.base_color - base) ** 2).mean().sqrt() < 0.02
+
+
+def test_levenberg_marquardt_total_variation_smooths():
+    data, _ = self_consistent_data(150, 100)
+    noisy = data.clone()
+    g = torch.Generator().manual_seed(0)
+    noisy.obs_radiance = data.obs_radiance * (
+        1 + 0.3 * torch.randn(data.obs_radiance.shape, dtype=torch.float64,
+                              generator=g)).clamp_min(0)
+    model = FrequencySVBRDF(150)
+    edges = model._graph(noisy, 6)
+    plain = model.fit(noisy, solver='lm', tv_k=6, progress=False)
+    tv_plain = float(model.total_variation(edges))
+    smooth = model.fit(noisy, solver='lm', tv_weight=0.05, tv_k=6,
+                       progress=False)
+    assert float(model.total_variation(edges)) < 0.8 * tv_plain
+    assert smooth.loss[-1] > plain.loss[-1]  # traded for smoothness
+
+
 def test_known_metallic_is_held():
     data, (base, metallic, roughness) = self_consistent_data(150, 60)
     data = SpectralUncertainty()(data)
@@ -142,6 +189,10 @@ def test_bad_input():
         FrequencySVBRDF(30).fit(data, steps=-1, progress=False)
     with pytest.raises(ValueError, match="'metallic' must be None"):
         FrequencySVBRDF(30).fit(data, metallic=1.5, progress=False)
+    with pytest.raises(ValueError, match="'solver' must be one of"):
+        FrequencySVBRDF(30).fit(data, solver='newton', progress=False)
+    with pytest.raises(ValueError, match="'rounds' must be at least 1"):
+        FrequencySVBRDF(30).fit(data, solver='lm', rounds=0, progress=False)
     broken = data.clone()
     broken.obs_radiance = broken.obs_radiance.clone()
     broken.obs_radiance[0, 0, 0] = math.nan

@@ -10,8 +10,8 @@ from tg_intrinsic.geometry.appearance.brdf import reflect, to_local
 from tg_intrinsic.geometry.appearance.envmap import (check_envmap,
                                                      equirect_lookup,
                                                      filter_envmap, irradiance)
-from tg_intrinsic.geometry.appearance.sh import (fit_sh, light_directions,
-                                                 light_fit_matrix,
+from tg_intrinsic.geometry.appearance.sh import (fit_light, fit_sh,
+                                                 light_directions,
                                                  num_coefficients)
 from tg_intrinsic.geometry.checks import (check_frames, check_points,
                                           check_positive_float,
@@ -126,12 +126,17 @@ class FitSphericalHarmonics(BaseTransform):
             prefilter = max(1 / math.sqrt(num_views), 1 / self.l_max)
         light = filter_envmap(envmap, prefilter) if prefilter > 0 else envmap
 
-        # Incoming light at Fibonacci directions of every local frame.
+        # Incoming light at Fibonacci directions of every local frame, read
+        # above the horizon only (the fit gives the others weight 0).
         local = light_directions(self.num_light_samples, pos.dtype,
                                  pos.device)
-        light_radiance = equirect_lookup(light, local @ frame)  # (N, S, 3)
-        sh_in = light_fit_matrix(local, self.l_max, self.regularizer) \
-            @ light_radiance
+        upper = local[:, 2] > 0
+        light_radiance = torch.zeros(num, local.size(0), 3, dtype=pos.dtype,
+                                     device=pos.device)
+        light_radiance[:, upper] = equirect_lookup(light,
+                                                   local[upper] @ frame)
+        sh_in = fit_light(local, light_radiance, self.l_max,
+                          self.regularizer)
 
         # Outgoing radiance as a function of the mirror direction.
         mask = mask.bool()
@@ -140,10 +145,11 @@ class FitSphericalHarmonics(BaseTransform):
         weights = mirror_local[..., 2].clamp_min(0) * mask
         values = torch.where(mask.unsqueeze(-1), radiance.to(pos.dtype),
                              torch.zeros_like(radiance, dtype=pos.dtype))
-        sh_out = fit_sh(mirror_local, values, self.l_max, weights,
-                        self.regularizer)
-        sh_in_obs = fit_sh(mirror_local, equirect_lookup(light, mirror),
-                           self.l_max, weights, self.regularizer)
+        # one factorisation for both: same directions, same weights
+        both = fit_sh(mirror_local, torch.cat(
+            [values, equirect_lookup(light, mirror)], -1), self.l_max,
+            weights, self.regularizer)
+        sh_out, sh_in_obs = both[..., :3], both[..., 3:]
 
         data = data.clone()
         data.frame = frame

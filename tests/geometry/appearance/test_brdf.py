@@ -6,11 +6,10 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from tg_intrinsic.geometry.appearance.brdf import (lobe_filter,
-                                                   observed_spectra, reflect,
-                                                   sh_reflectance,
-                                                   spectral_uncertainty,
-                                                   to_local)
+from tg_intrinsic.geometry.appearance.brdf import (
+    lobe_degree_sums, lobe_filter, observed_spectra, principled_reflectance,
+    principled_reflectance_jacobian, reflect, sh_reflectance,
+    spectral_uncertainty, to_local)
 from tg_intrinsic.geometry.pointcloud.frames import tangent_frames
 from tg_intrinsic.geometry.appearance.sh import (fibonacci_sphere, fit_sh,
                                       principled_to_torrance_sparrow,
@@ -288,3 +287,64 @@ def test_a_channel_without_light_is_uninformative_not_an_overflow(dtype):
     lit = spectral_uncertainty(*[s[..., :2].to(dtype) for s in
                                  observed_spectra(light, outgoing)])
     assert torch.allclose(entropy, lit[0]) and torch.equal(r_hat, lit[2])
+
+
+def random_reflection_inputs(num=7, views=5, l_max=L_MAX, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    sh_in = torch.randn(num, (l_max + 1) ** 2, 3, dtype=torch.float64,
+                        generator=g)
+    irradiance = torch.rand(num, 3, dtype=torch.float64, generator=g)
+    mirror = unit(torch.randn(num, views, 3, dtype=torch.float64,
+                              generator=g))
+    mirror[..., 2] = mirror[..., 2].abs()
+    base = torch.rand(num, 3, dtype=torch.float64, generator=g)
+    metallic = torch.rand(num, dtype=torch.float64, generator=g)
+    roughness = 0.1 + 0.8 * torch.rand(num, dtype=torch.float64, generator=g)
+    roughness[0] = 0.01  # below the model's alpha floor
+    return sh_in, irradiance, mirror, base, metallic, roughness
+
+
+def test_per_degree_filter_and_sums_rebuild_the_lobe():
+    alpha = torch.tensor([0.05, 0.3, 0.9], dtype=torch.float64)
+    per_degree = lobe_filter(L_MAX, alpha, 0.2, per_degree=True)
+    assert per_degree.shape == (3, L_MAX + 1)
+    full = lobe_filter(L_MAX, alpha, 0.2)
+    for l in range(L_MAX + 1):  # noqa: E741
+        assert torch.equal(full[:, l * l:(l + 1) ** 2],
+                           per_degree[:, l:l + 1].expand(-1, 2 * l + 1))
+    sh_in, _, mirror, *_ = random_reflection_inputs()
+    basis = real_sh(mirror, L_MAX)
+    sums = lobe_degree_sums(sh_in, basis)
+    assert sums.shape == (7, 5, 3, L_MAX + 1)
+    # summed over degrees: the light itself along the directions
+    torch.testing.assert_close(sums.sum(-1), basis @ sh_in)
+
+
+@pytest.mark.parametrize('model,fresnel,masking', [
+    ('eq5.11', True, True), ('eq5.11', False, True), ('eq5.11', True, False),
+    ('split_sum', True, True)])
+def test_material_part_and_its_jacobian(model, fresnel, masking):
+    sh_in, irradiance, mirror, base, metallic, roughness = \
+        random_reflection_inputs()
+    reference = sh_reflectance(sh_in, irradiance, mirror, base, metallic,
+                               roughness, 0.2, fresnel, masking, model)
+    from tg_intrinsic.geometry.appearance.brdf import dominant_direction
+    direction = dominant_direction(mirror, roughness) \
+        if model == 'split_sum' else mirror
+    sums = lobe_degree_sums(sh_in, real_sh(direction, L_MAX))
+    args = (sums, irradiance, mirror)
+    options = (0.2, fresnel, masking, model)
+    value = principled_reflectance(*args, base, metallic, roughness,
+                                   *options)
+    torch.testing.assert_close(value, reference, rtol=1e-12, atol=1e-12)
+    value, jacobian = principled_reflectance_jacobian(
+        *args, base, metallic, roughness, *options)
+    torch.testing.assert_close(value, reference, rtol=1e-12, atol=1e-12)
+
+    def of_parameters(x):
+        return principled_reflectance(*args, x[:, :3], x[:, 3], x[:, 4],
+                                      *options)
+    x = torch.cat([base, metallic[:, None], roughness[:, None]], 1)
+    full = torch.autograd.functional.jacobian(of_parameters, x)
+    per_point = torch.stack([full[i, :, :, i] for i in range(x.size(0))])
+    torch.testing.assert_close(jacobian, per_point, rtol=1e-10, atol=1e-12)

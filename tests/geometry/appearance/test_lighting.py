@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 import torch
-from numba import njit
 
 from tg_intrinsic.geometry.appearance import lighting
 from tg_intrinsic.geometry.appearance.envmap import (equirect_directions,
@@ -19,17 +18,6 @@ from tg_intrinsic.geometry.appearance.sh import (
 
 from tests.geometry.appearance.scenes import (D64, material, sky_with_sun,
                                               unit)
-
-
-@njit(cache=True)
-def kernel_lookup(env, dirs):
-    """The per-sample lookup the shading kernels inline."""
-    out = np.empty((dirs.shape[0], 3))
-    for k in range(dirs.shape[0]):
-        row, col = lighting._env_coords(dirs[k, 0], dirs[k, 1], dirs[k, 2],
-                                        env.shape[0], env.shape[1])
-        out[k, 0], out[k, 1], out[k, 2] = lighting._bilinear(env, row, col)
-    return out
 
 
 def scene_points(num=3, views=3, seed=1):
@@ -67,17 +55,6 @@ def brute_force(env, n, wo, base_color, metallic, roughness, rows=512):
                     / (4 * co))[..., None] * F
             out[i, v] = diffuse + (spec * weight).sum((0, 1))
     return out
-
-
-def test_numba_lookup_matches_torch():
-    g = torch.Generator().manual_seed(0)
-    env = torch.rand(7, 12, 3, dtype=D64, generator=g)
-    d = unit(torch.randn(2000, 3, dtype=D64, generator=g))
-    poles = torch.tensor([[0, 0, 1.0], [0, 0, -1.0], [-1.0, 0, 0],
-                          [-1.0, -1e-17, 0]], dtype=D64)
-    d = torch.cat([d, poles])
-    np.testing.assert_allclose(kernel_lookup(env.numpy(), d.numpy()),
-                               equirect_lookup(env, d).numpy(), atol=1e-13)
 
 
 @pytest.mark.parametrize('metallic', [0.0, 1.0])

@@ -10,9 +10,13 @@ import torch
 from scipy.special import sph_harm_y
 from scipy.spatial.transform import Rotation
 
-from tg_intrinsic.geometry.appearance.sh import (fibonacci_sphere, fit_sh,
-                                      num_coefficients, power_spectrum,
-                                      real_sh, sh_index)
+from tg_intrinsic.geometry.appearance.sh import (fibonacci_sphere,
+                                                 fit_light, fit_sh,
+                                                 light_directions,
+                                                 light_fit_matrix,
+                                                 num_coefficients,
+                                                 power_spectrum, real_sh,
+                                                 sh_index)
 
 L_MAX = 8
 
@@ -220,3 +224,35 @@ def test_principled_round_trip():
     assert float(m) < 0.2 + 1e-12
     kd2, r02, _ = principled_to_torrance_sparrow(b, m, alpha)
     assert torch.allclose(kd2, kd) and torch.allclose(r02, r0)
+
+
+def test_fit_light_is_the_fit_matrix_over_the_upper_hemisphere():
+    local = light_directions(300)
+    g = torch.Generator().manual_seed(4)
+    samples = torch.rand(6, 300, 3, dtype=torch.float64, generator=g)
+    expected = light_fit_matrix(local, 4, 1e-3) @ samples
+    torch.testing.assert_close(fit_light(local, samples, 4, 1e-3), expected,
+                               rtol=1e-12, atol=1e-12)
+    # samples below the horizon are not read
+    lower = local[:, 2] <= 0
+    changed = samples.clone()
+    changed[:, lower] = 1e6
+    torch.testing.assert_close(fit_light(local, changed, 4, 1e-3), expected,
+                               rtol=1e-12, atol=1e-12)
+
+
+def test_regularised_fit_is_the_normal_equations_solution():
+    d = random_directions(40, seed=5)[:40]
+    g = torch.Generator().manual_seed(5)
+    values = torch.randn(3, 40, 2, dtype=torch.float64, generator=g)
+    weights = torch.rand(3, 40, dtype=torch.float64, generator=g)
+    ours = fit_sh(d.expand(3, 40, 3), values, 4, weights, regularizer=1e-2)
+    Y = real_sh(d, 4)
+    degree = torch.tensor([l for l in range(5) for _ in range(2 * l + 1)],
+                          dtype=torch.float64)
+    for i in range(3):
+        W = torch.diag(weights[i])
+        gram = Y.t() @ W @ Y + 1e-2 * torch.diag(degree.exp())
+        expected = torch.linalg.solve(gram, Y.t() @ W @ values[i])
+        torch.testing.assert_close(ours[i], expected, rtol=1e-10,
+                                   atol=1e-12)

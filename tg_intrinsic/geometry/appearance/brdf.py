@@ -15,6 +15,7 @@ import math
 import numba
 import numpy as np
 import torch
+import torch.autograd.forward_ad as forward_ad
 from torch import Tensor
 
 from .sh import (num_coefficients, power_spectrum, real_sh, schlick_fresnel,
@@ -38,21 +39,21 @@ def to_local(vectors: Tensor, frame: Tensor) -> Tensor:
     return (flat @ frame.transpose(1, 2)).reshape(shape)
 
 
-def degrees(l_max: int, dtype=torch.float64, device=None) -> Tensor:
-    """The degree :math:`l` of every coefficient, :math:`((l^*+1)^2)`."""
-    l = torch.arange(l_max + 1, dtype=dtype, device=device)  # noqa: E741
-    return l.repeat_interleave(2 * l.long() + 1)
-
-
-def lobe_filter(l_max: int, alpha: Tensor, prefilter_alpha: float = 0.0
-                ) -> Tensor:
+def lobe_filter(l_max: int, alpha: Tensor, prefilter_alpha: float = 0.0,
+                per_degree: bool = False) -> Tensor:
     r"""SH attenuation of the specular lobe for light that was already
     band-limited by a filter of width :math:`\alpha'`,
     :math:`e^{-(\alpha^2 - \alpha'^2) l^2}`: :math:`(\ldots)` to
-    :math:`(\ldots, (l^*+1)^2)`. With :math:`\alpha'=0` it is
+    :math:`(\ldots, (l^*+1)^2)`, or to :math:`(\ldots, l^* + 1)` (one value
+    per degree) with :obj:`per_degree`. With :math:`\alpha'=0` it is
     :func:`~tg_intrinsic.geometry.appearance.sh.brdf_filter`."""
-    l = degrees(l_max, alpha.dtype, alpha.device)  # noqa: E741
-    return torch.exp(-(alpha.unsqueeze(-1) ** 2 - prefilter_alpha ** 2) * l * l)
+    l = torch.arange(l_max + 1, dtype=alpha.dtype,  # noqa: E741
+                     device=alpha.device)
+    lobe = torch.exp(-(alpha.unsqueeze(-1) ** 2 - prefilter_alpha ** 2)
+                     * l * l)
+    if per_degree:
+        return lobe
+    return lobe.repeat_interleave(2 * l.long() + 1, dim=-1)
 
 
 @functools.lru_cache(maxsize=4)
@@ -190,24 +191,68 @@ def sh_reflectance(sh_in: Tensor, irradiance: Tensor, mirror_dir: Tensor,
         :math:`(N, V, 3)`.
     """
     l_max = int(round(math.sqrt(sh_in.size(1)))) - 1
+    if basis_out is None:
+        direction = mirror_dir
+        if specular_model == 'split_sum':
+            direction = dominant_direction(mirror_dir, roughness)
+        basis_out = real_sh(direction, l_max)
+    return principled_reflectance(
+        lobe_degree_sums(sh_in, basis_out), irradiance, mirror_dir,
+        base_color, metallic, roughness, prefilter_alpha, fresnel, masking,
+        specular_model)
+
+
+def lobe_degree_sums(sh_in: Tensor, basis_out: Tensor) -> Tensor:
+    r"""The incoming light read along every outgoing lobe direction, one sum
+    per degree,
+
+    .. math::
+        S_l(\omega) = \sum_{m=-l}^{l} L_{lm}\, Y_{lm}(\omega),
+
+    so that a lobe filter :math:`f_l(\alpha)` gives the specular light
+    :math:`\sum_l f_l(\alpha) S_l` without touching the coefficients
+    again: fitting a material changes only :math:`f_l`.
+
+    Args:
+        sh_in (torch.Tensor): Incoming SH per point :math:`(N, K, 3)`.
+        basis_out (torch.Tensor): Harmonics at the lobe directions
+            :math:`(N, V, K)`.
+
+    Returns:
+        :math:`(N, V, 3, l^* + 1)`, the degree last.
+    """
+    l_max = int(round(math.sqrt(sh_in.size(1)))) - 1
+    return torch.stack([basis_out[..., l * l:(l + 1) ** 2]
+                        @ sh_in[:, l * l:(l + 1) ** 2]
+                        for l in range(l_max + 1)], -1)  # noqa: E741
+
+
+def principled_reflectance(degree_sums: Tensor, irradiance: Tensor,
+                           mirror_dir: Tensor, base_color: Tensor,
+                           metallic: Tensor, roughness: Tensor,
+                           prefilter_alpha: float = 0.0, fresnel: bool = True,
+                           masking: bool = True,
+                           specular_model: str = 'eq5.11') -> Tensor:
+    r""":func:`sh_reflectance` from the light's :func:`lobe_degree_sums`
+    (at the mirror directions for eq. 5.11, at the lobes' dominant
+    directions for the split sum): the part that depends on the material,
+    cheap enough to evaluate at every step of a fit.
+
+    Returns:
+        :math:`(N, V, 3)`.
+    """
     alpha = roughness * roughness
     # the floor keeps the gradient of r^2: a hard clamp would zero it and
     # strand a fit that touches the floor there for good
     alpha = alpha + (MIN_ALPHA - alpha).clamp_min(0).detach()
-    coefficients = sh_in * lobe_filter(l_max, alpha, prefilter_alpha
-                                       ).unsqueeze(-1)
+    lobe = lobe_filter(degree_sums.size(-1) - 1, alpha, prefilter_alpha,
+                       per_degree=True)
+    specular = (degree_sums @ lobe[:, None, :, None]).squeeze(-1)
     cos_out = mirror_dir[..., 2]
     r0 = 0.04 + (base_color - 0.04) * metallic.unsqueeze(-1)
     if specular_model == 'split_sum':
-        if basis_out is None:
-            basis_out = real_sh(dominant_direction(mirror_dir, roughness),
-                                l_max)
-        specular = basis_out @ coefficients
         specular = specular * ggx_albedo(cos_out, roughness, r0)
     else:
-        if basis_out is None:
-            basis_out = real_sh(mirror_dir, l_max)
-        specular = basis_out @ coefficients  # (N, V, 3)
         r0 = r0.unsqueeze(1)
         if fresnel:
             specular = specular * schlick_fresnel(cos_out.unsqueeze(-1), r0)
@@ -218,6 +263,71 @@ def sh_reflectance(sh_in: Tensor, irradiance: Tensor, mirror_dir: Tensor,
                                            ).unsqueeze(-1)
     diffuse = base_color * (1 - metallic.unsqueeze(-1)) * irradiance / math.pi
     return diffuse.unsqueeze(1) + specular
+
+
+def principled_reflectance_jacobian(
+        degree_sums: Tensor, irradiance: Tensor, mirror_dir: Tensor,
+        base_color: Tensor, metallic: Tensor, roughness: Tensor,
+        prefilter_alpha: float = 0.0, fresnel: bool = True,
+        masking: bool = True, specular_model: str = 'eq5.11') -> tuple:
+    r""":func:`principled_reflectance` and its derivatives with respect to
+    the base colour (3), metallic and roughness of each point, for
+    per-point second-order fits. The model is bilinear in base colour and
+    metallic, so those columns follow from its factors; the roughness
+    column takes the derivatives of the lobe filter, the masking and the
+    albedo table by forward-mode differentiation, and reads the light once
+    for value and derivative.
+
+    Returns:
+        ``(value, jacobian)``: :math:`(N, V, 3)` and :math:`(N, V, 3, 5)`,
+        columns :math:`(b_r, b_g, b_b, m, r)`.
+    """
+    n, v = mirror_dir.shape[:2]
+    with forward_ad.dual_level():
+        rough = forward_ad.make_dual(roughness, torch.ones_like(roughness))
+        alpha = rough * rough
+        alpha = alpha + (MIN_ALPHA - alpha).clamp_min(0).detach()
+        lobe = forward_ad.unpack_dual(lobe_filter(
+            degree_sums.size(-1) - 1, alpha, prefilter_alpha,
+            per_degree=True))
+        cos_out = mirror_dir[..., 2]
+        if specular_model == 'split_sum':
+            ones = torch.ones(n, 1, dtype=roughness.dtype,
+                              device=roughness.device)
+            bias = ggx_albedo(cos_out, rough, 0 * ones)
+            slope = forward_ad.unpack_dual(ggx_albedo(cos_out, rough, ones)
+                                           - bias)
+            bias = forward_ad.unpack_dual(bias)
+        elif masking:
+            mask = forward_ad.unpack_dual(smith_g1(cos_out,
+                                                   alpha.unsqueeze(-1)))
+    light = torch.bmm(degree_sums.reshape(n, v * 3, -1),
+                      torch.stack([lobe.primal, lobe.tangent], -1))
+    light, light_d = light.view(n, v, 3, 2).unbind(-1)
+    m = metallic.view(n, 1, 1)
+    color = base_color.unsqueeze(1)
+    r0 = 0.04 + (color - 0.04) * m
+    diffuse = (irradiance / math.pi).unsqueeze(1).expand(n, v, 3)
+    if specular_model == 'split_sum':
+        weight = r0 * slope.primal + bias.primal
+        weight_d = r0 * slope.tangent + bias.tangent
+        d_r0 = light * slope.primal
+    else:
+        c = cos_out.clamp(0.0, 1.0).unsqueeze(-1)
+        q = 1 - (1 - c) ** 5 if fresnel else torch.ones_like(c)
+        g = mask.primal.unsqueeze(-1) if masking else torch.ones_like(c)
+        g_d = mask.tangent.unsqueeze(-1) if masking else torch.zeros_like(c)
+        fres = r0 * q + (1 - q)
+        weight, weight_d = fres * g, fres * g_d
+        d_r0 = light * q * g
+    specular = light * weight
+    value = color * (1 - m) * diffuse + specular
+    jacobian = value.new_zeros(n, v, 3, 5)
+    d_color = (1 - m) * diffuse + d_r0 * m
+    jacobian[..., [0, 1, 2], [0, 1, 2]] = d_color
+    jacobian[..., 3] = -color * diffuse + d_r0 * (color - 0.04)
+    jacobian[..., 4] = light_d * weight + light * weight_d
+    return value, jacobian
 
 
 def spectral_grid(num_specular: int, num_roughness: int, dtype=torch.float64,

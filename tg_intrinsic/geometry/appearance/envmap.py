@@ -14,7 +14,9 @@ azimuth.
 """
 import math
 
+import numpy as np
 import torch
+from numba import njit, prange
 from torch import Tensor
 
 from ..checks import check_positive_int, check_tensor
@@ -83,10 +85,59 @@ def direction_to_equirect(directions: Tensor, height: int, width: int):
                                                                    math.pi))
 
 
+@njit(cache=True, inline='always')
+def env_coords(dx, dy, dz, height, width):  # pragma: no cover (numba)
+    """Continuous pixel coordinates (row, col) of a unit direction, as
+    :func:`~tg_intrinsic.geometry.appearance.envmap.direction_to_equirect`."""
+    z = min(1.0, max(-1.0, dz))
+    theta = math.acos(z)
+    phi = math.atan2(dy, dx)
+    return theta * (height / math.pi), (phi + math.pi) * (width /
+                                                         (2 * math.pi))
+
+
+@njit(cache=True, inline='always')
+def bilinear_rgb(env, row, col):  # pragma: no cover (numba)
+    """Bilinear radiance at continuous pixel coordinates, exactly as
+    :func:`~tg_intrinsic.geometry.appearance.envmap.equirect_lookup` (wrapping in
+    azimuth, clamped at the poles)."""
+    height, width = env.shape[0], env.shape[1]
+    row = min(max(row - 0.5, 0.0), height - 1.0)
+    col = col - 0.5
+    r0 = min(math.floor(row), height - 2.0)
+    c0 = math.floor(col)
+    fr = row - r0
+    fc = col - c0
+    i0 = np.int64(r0)
+    j0 = np.int64(c0) % width
+    j1 = (j0 + 1) % width
+    w00 = (1 - fr) * (1 - fc)
+    w01 = (1 - fr) * fc
+    w10 = fr * (1 - fc)
+    w11 = fr * fc
+    r = (w00 * env[i0, j0, 0] + w01 * env[i0, j1, 0]
+         + w10 * env[i0 + 1, j0, 0] + w11 * env[i0 + 1, j1, 0])
+    g = (w00 * env[i0, j0, 1] + w01 * env[i0, j1, 1]
+         + w10 * env[i0 + 1, j0, 1] + w11 * env[i0 + 1, j1, 1])
+    b = (w00 * env[i0, j0, 2] + w01 * env[i0, j1, 2]
+         + w10 * env[i0 + 1, j0, 2] + w11 * env[i0 + 1, j1, 2])
+    return r, g, b
+
+
 def equirect_lookup(envmap: Tensor, directions: Tensor) -> Tensor:
     r"""Radiance of :obj:`envmap` :math:`(H, W, C)` in unit
     :obj:`directions` :math:`(\ldots, 3)`, bilinear between pixel centres
-    (wrapping in azimuth, clamped at the poles): :math:`(\ldots, C)`."""
+    (wrapping in azimuth, clamped at the poles): :math:`(\ldots, C)`.
+    Compiled on the CPU for RGB maps when no gradient is needed."""
+    if envmap.device.type == 'cpu' and directions.device.type == 'cpu' \
+            and envmap.dim() == 3 and envmap.size(-1) == 3 \
+            and not (torch.is_grad_enabled() and (
+                envmap.requires_grad or directions.requires_grad)):
+        flat = directions.detach().reshape(-1, 3).to(torch.float64)
+        out = _lookup_rgb(envmap.detach().to(torch.float64).contiguous()
+                          .numpy(), flat.contiguous().numpy())
+        return torch.from_numpy(out).to(envmap.dtype).view(
+            *directions.shape[:-1], 3)
     height, width = envmap.shape[:2]
     row, col = direction_to_equirect(directions.to(envmap.dtype), height,
                                      width)
@@ -107,6 +158,17 @@ def equirect_lookup(envmap: Tensor, directions: Tensor) -> Tensor:
     top = at(r0, c0) * (1 - fc) + at(r0, c1) * fc
     bottom = at(r0 + 1, c0) * (1 - fc) + at(r0 + 1, c1) * fc
     return top * (1 - fr) + bottom * fr
+
+
+@njit(cache=True, parallel=True)
+def _lookup_rgb(env, dirs):  # pragma: no cover (numba)
+    out = np.empty((dirs.shape[0], 3))
+    height, width = env.shape[0], env.shape[1]
+    for k in prange(dirs.shape[0]):
+        row, col = env_coords(dirs[k, 0], dirs[k, 1], dirs[k, 2], height,
+                              width)
+        out[k, 0], out[k, 1], out[k, 2] = bilinear_rgb(env, row, col)
+    return out
 
 
 # ------------------------------------------------- spherical harmonics, filters

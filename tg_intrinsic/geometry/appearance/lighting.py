@@ -32,7 +32,7 @@ from torch import Tensor
 
 from ..checks import (check_points, check_positive_int, check_seed,
                       check_tensor, check_unit_interval, check_unit_rows)
-from .envmap import check_envmap, equirect_lookup
+from .envmap import bilinear_rgb, check_envmap, env_coords, equirect_lookup
 from .sh import principled_to_torrance_sparrow
 
 __all__ = ['render_radiance']
@@ -58,49 +58,10 @@ def _hash_uniform(seed, i, j, k):  # pragma: no cover (numba)
     return np.float64(x >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
-@njit(cache=True, inline='always')
-def _env_coords(dx, dy, dz, height, width):  # pragma: no cover (numba)
-    """Continuous pixel coordinates (row, col) of a unit direction, as
-    :func:`~tg_intrinsic.geometry.appearance.envmap.direction_to_equirect`."""
-    z = min(1.0, max(-1.0, dz))
-    theta = math.acos(z)
-    phi = math.atan2(dy, dx)
-    return theta * (height / math.pi), (phi + math.pi) * (width /
-                                                         (2 * math.pi))
-
-
-@njit(cache=True, inline='always')
-def _bilinear(env, row, col):  # pragma: no cover (numba)
-    """Bilinear radiance at continuous pixel coordinates, exactly as
-    :func:`~tg_intrinsic.geometry.appearance.envmap.equirect_lookup` (wrapping in
-    azimuth, clamped at the poles)."""
-    height, width = env.shape[0], env.shape[1]
-    row = min(max(row - 0.5, 0.0), height - 1.0)
-    col = col - 0.5
-    r0 = min(math.floor(row), height - 2.0)
-    c0 = math.floor(col)
-    fr = row - r0
-    fc = col - c0
-    i0 = np.int64(r0)
-    j0 = np.int64(c0) % width
-    j1 = (j0 + 1) % width
-    w00 = (1 - fr) * (1 - fc)
-    w01 = (1 - fr) * fc
-    w10 = fr * (1 - fc)
-    w11 = fr * fc
-    r = (w00 * env[i0, j0, 0] + w01 * env[i0, j1, 0]
-         + w10 * env[i0 + 1, j0, 0] + w11 * env[i0 + 1, j1, 0])
-    g = (w00 * env[i0, j0, 1] + w01 * env[i0, j1, 1]
-         + w10 * env[i0 + 1, j0, 1] + w11 * env[i0 + 1, j1, 1])
-    b = (w00 * env[i0, j0, 2] + w01 * env[i0, j1, 2]
-         + w10 * env[i0 + 1, j0, 2] + w11 * env[i0 + 1, j1, 2])
-    return r, g, b
-
-
 def _lookup(env: np.ndarray, dirs: np.ndarray) -> np.ndarray:
     """The appearance package's bilinear equirectangular lookup on numpy
-    arrays (the kernels inline the same rule per sample: _env_coords,
-    _bilinear)."""
+    arrays (the kernels inline the same rule per sample: env_coords,
+    bilinear_rgb)."""
     return equirect_lookup(torch.from_numpy(np.asarray(env, np.float64)),
                            torch.from_numpy(np.asarray(dirs, np.float64))
                            ).numpy()
@@ -375,8 +336,8 @@ def _specular_kernel(normal, r0, alpha, view, mask, env, num_brdf,
             cos_i = dx * nx + dy * ny + dz * nz
             if cos_i <= 0.0:
                 continue
-            row, col = _env_coords(dx, dy, dz, height, width)
-            lr, lg, lb = _bilinear(env, row, col)
+            row, col = env_coords(dx, dy, dz, height, width)
+            lr, lg, lb = bilinear_rgb(env, row, col)
             g1i = _smith_g1(cos_i, a2)
             light[used, 0], light[used, 1], light[used, 2] = dx, dy, dz
             light[used, 3] = density[i, j]
@@ -416,8 +377,8 @@ def _specular_kernel(normal, r0, alpha, view, mask, env, num_brdf,
                 dx = ix * tx + iy * bx + iz * nx
                 dy = ix * ty + iy * by + iz * ny
                 dz = ix * tz + iy * bz + iz * nz
-                row, col = _env_coords(dx, dy, dz, height, width)
-                lr, lg, lb = _bilinear(env, row, col)
+                row, col = env_coords(dx, dy, dz, height, width)
+                lr, lg, lb = bilinear_rgb(env, row, col)
                 # estimator F G1(wi) L, times the balance-heuristic weight
                 weight = _smith_g1(iz, a2)
                 if num_light > 0:

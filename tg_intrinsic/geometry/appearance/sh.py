@@ -159,7 +159,10 @@ def fit_sh(directions: Tensor, values: Tensor, l_max: int,
         coefficients = torch.linalg.lstsq(gram, Yw.transpose(-1, -2) @ f
                                           ).solution
     else:
-        coefficients = torch.linalg.solve(gram, Yw.transpose(-1, -2) @ f)
+        # positive definite: Cholesky, about twice as fast as LU
+        factor = torch.linalg.cholesky(gram)
+        coefficients = torch.cholesky_solve(Yw.transpose(-1, -2) @ f,
+                                            factor)
     return coefficients.squeeze(-1) if squeeze else coefficients
 
 
@@ -279,3 +282,17 @@ def light_fit_matrix(directions, l_max: int, regularizer: float):
     l = l.repeat_interleave(2 * l.long() + 1)
     gram = (Y * weights).t() @ Y + regularizer * torch.diag(l.exp())
     return torch.linalg.solve(gram, (Y * weights).t())
+
+
+def fit_light(directions: Tensor, samples: Tensor, l_max: int,
+              regularizer: float) -> Tensor:
+    r""":func:`light_fit_matrix` applied to the light samples of many
+    points, :math:`(N, S, C)` at the shared :obj:`directions` :math:`(S,
+    3)`, as one matrix product over the samples the fit reads (those above
+    the horizon; the others have weight 0): :math:`(N, K, C)`."""
+    upper = directions[:, 2] > 0
+    matrix = light_fit_matrix(directions, l_max, regularizer)[:, upper]
+    num, _, channels = samples.shape
+    above = samples[:, upper].to(matrix.dtype)           # (N, S', C)
+    out = matrix @ above.transpose(0, 1).reshape(matrix.size(1), -1)
+    return out.view(-1, num, channels).transpose(0, 1)

@@ -1,0 +1,227 @@
+r"""Batched Levenberg-Marquardt for many small independent problems, such
+as one SVBRDF per surface point: every row of the parameters has its own
+residuals, damping and acceptance, and all rows are solved at once as
+``[N, P, P]`` systems."""
+from dataclasses import dataclass, field
+from typing import Callable, List, Optional
+
+import torch
+import torch.autograd.forward_ad as forward_ad
+from torch import Tensor
+
+from tg_intrinsic.geometry.checks import (check_choice, check_float_tensor,
+                                          check_positive_float,
+                                          check_positive_int)
+
+LOSSES = ('l2', 'l1')
+
+
+@dataclass
+class LMInfo:
+    """What a :func:`levenberg_marquardt` run did: iterations, the mean
+    objective over the rows before and after each iteration, how many rows
+    were still moving (``active``) after each, and whether all rows
+    stopped before ``max_iter``."""
+    iterations: int = 0
+    objective: List[float] = field(default_factory=list)
+    active: List[int] = field(default_factory=list)
+    converged: bool = False
+
+
+def levenberg_marquardt(residual: Callable[[Tensor], Tensor], x0: Tensor,
+                        weight: Optional[Tensor] = None,
+                        lower: Optional[Tensor] = None,
+                        upper: Optional[Tensor] = None, loss: str = 'l2',
+                        max_iter: int = 30, tol: float = 1e-6,
+                        damping: float = 1e-3, l1_epsilon: float = 1e-3,
+                        jacobian: Optional[Callable] = None,
+                        max_step: Optional[float] = None) -> tuple:
+    r"""Minimises, for every row :math:`n` independently,
+
+    .. math::
+        E_n(x_n) = \sum_k w_{nk}\, \rho(r_{nk}(x_n)), \qquad
+        \text{lower}_n \le x_n \le \text{upper}_n,
+
+    with :math:`\rho(r) = r^2` (:obj:`loss='l2'`) or :math:`|r|`
+    (:obj:`loss='l1'`, by iteratively reweighted least squares with
+    weights :math:`1 / \max(|r|, \epsilon)`). Each iteration solves the
+    damped normal equations of every row,
+
+    .. math::
+        (J^\top W J + \lambda \operatorname{diag}(J^\top W J))\, \delta =
+        -J^\top W r,
+
+    with the parameters that sit on a bound and would leave it held there,
+    projects :math:`x + \delta` onto the bounds and keeps it only where the
+    objective decreased; :math:`\lambda` shrinks on success and grows on
+    failure, per row. Rows that stopped are not evaluated again. The
+    Jacobian comes from forward-mode automatic differentiation, in one
+    evaluation of :obj:`residual` on :math:`P` stacked copies of the rows,
+    so :obj:`residual` must be built from differentiable torch
+    operations, unless :obj:`jacobian` computes it.
+
+    Args:
+        residual (callable): ``residual(x, rows)`` maps the parameters
+            :math:`(n, P)` of the rows ``rows`` (a ``torch.long`` index
+            :math:`(n)` into :math:`0, \dots, N - 1`) to their residuals
+            :math:`(n, R)`; row :math:`i` of the output may depend on row
+            :math:`i` of ``x`` only.
+        x0 (torch.Tensor): Start :math:`(N, P)`, inside the bounds.
+        weight (torch.Tensor, optional): Non-negative weights
+            :math:`(N, R)`. (default: :obj:`None`, all 1)
+        lower, upper (torch.Tensor, optional): Bounds :math:`(P)` or
+            :math:`(N, P)`. (default: :obj:`None`, unbounded)
+        loss (str, optional): :obj:`'l2'` or :obj:`'l1'`.
+            (default: :obj:`'l2'`)
+        max_iter (int, optional): Iterations. (default: :obj:`30`)
+        tol (float, optional): A row stops once an accepted step lowers its
+            objective by less than :obj:`tol` times its value, or its
+            damping has grown past :math:`10^{8}` (no step helps).
+            (default: :obj:`1e-6`)
+        damping (float, optional): Initial :math:`\lambda`.
+            (default: :obj:`1e-3`)
+        l1_epsilon (float, optional): :math:`\epsilon` of the L1 weights,
+            in the units of the residuals. (default: :obj:`1e-3`)
+        max_step (float, optional): Longest step of any one parameter in
+            one iteration (a trust region in parameter units, which keeps
+            a fit near its start where the objective has several minima).
+            (default: :obj:`None`)
+        jacobian (callable, optional): ``jacobian(x, rows)`` returns the
+            residuals and their Jacobian :math:`(n, R, P)` of those rows,
+            e.g. analytic; forward-mode differentiation of
+            :obj:`residual` otherwise. (default: :obj:`None`)
+
+    Returns:
+        ``(x, info)``: the parameters :math:`(N, P)` and an
+        :class:`LMInfo`.
+    """
+    x = check_float_tensor(x0, 'x0', x0.shape).detach().clone()
+    if x.dim() != 2:
+        raise ValueError(f"'x0' must be [N, P] (one row per problem), got "
+                         f"{list(x.shape)}")
+    loss = check_choice(loss, 'loss', LOSSES)
+    max_iter = check_positive_int(max_iter, 'max_iter', minimum=0)
+    tol = check_positive_float(tol, 'tol', allow_zero=True)
+    damping = check_positive_float(damping, 'damping')
+    l1_epsilon = check_positive_float(l1_epsilon, 'l1_epsilon')
+    if max_step is not None:
+        max_step = check_positive_float(max_step, 'max_step')
+    num, num_params = x.shape
+    lower = _bound(lower, 'lower', x, -float('inf'))
+    upper = _bound(upper, 'upper', x, float('inf'))
+    if bool((lower > upper).any()):
+        raise ValueError("'lower' must not exceed 'upper'")
+    if bool(((x < lower) | (x > upper)).any()):
+        raise ValueError("'x0' lies outside the bounds; clamp it first")
+
+    every = torch.arange(num, device=x.device)
+    with torch.no_grad():
+        r = _residual(residual, x, every)
+    if not bool(torch.isfinite(r).all()):
+        raise ValueError("'residual' is NaN or infinite at 'x0'")
+    if weight is None:
+        weight = torch.ones_like(r)
+    weight = check_float_tensor(weight, 'weight', r.shape)
+    if bool((weight < 0).any()):
+        raise ValueError("'weight' must be non-negative")
+
+    info = LMInfo()
+    cost = _objective(weight, r, loss)
+    info.objective.append(float(cost.mean()))
+    lam = torch.full((num, ), damping, dtype=x.dtype, device=x.device)
+    active = torch.ones(num, dtype=torch.bool, device=x.device)
+    eye = torch.eye(num_params, dtype=x.dtype, device=x.device)
+    for _ in range(max_iter):
+        if not bool(active.any()):
+            info.converged = True
+            break
+        rows = active.nonzero().flatten()
+        xa, ra = x[rows], r[rows]
+        if jacobian is None:
+            jac = _jacobian(residual, xa, rows)            # (n, R, P)
+        else:
+            jac = jacobian(xa, rows)[1].detach()
+        w = weight[rows]
+        if loss == 'l1':
+            w = w / ra.abs().clamp_min(l1_epsilon)
+        jw = jac * w.unsqueeze(-1)
+        hessian = jw.transpose(1, 2) @ jac                 # (n, P, P)
+        gradient = (jw * ra.unsqueeze(-1)).sum(1)          # (n, P)
+        diagonal = torch.diagonal(hessian, dim1=1, dim2=2)
+        scale = diagonal.amax(1, keepdim=True).clamp_min(1e-30)
+        system = hessian + lam[rows, None, None] * torch.diag_embed(
+            diagonal + 1e-9 * scale) + 1e-12 * scale.unsqueeze(-1) * eye
+        # parameters on a bound that descent pushes outwards stay there;
+        # the others are solved for without them (projected Newton)
+        pinned = ((xa <= lower[rows]) & (gradient > 0)) \
+            | ((xa >= upper[rows]) & (gradient < 0))
+        free = (~pinned).to(x.dtype)
+        system = system * free.unsqueeze(1) * free.unsqueeze(2) \
+            + torch.diag_embed(1 - free)
+        step = torch.linalg.solve(system, -(gradient * free).unsqueeze(-1)
+                                  )[..., 0]
+        if max_step is not None:
+            longest = step.abs().amax(1, keepdim=True)
+            step = step * (max_step / longest.clamp_min(max_step))
+        trial = torch.minimum(torch.maximum(xa + step, lower[rows]),
+                              upper[rows])
+        with torch.no_grad():
+            r_trial = _residual(residual, trial, rows)
+        new_cost = _objective(weight[rows], r_trial, loss)
+        better = torch.isfinite(new_cost) & (new_cost < cost[rows])
+        gain = (cost[rows] - new_cost) / cost[rows].clamp_min(1e-300)
+        take = rows[better]
+        x[take], r[take], cost[take] = trial[better], r_trial[better], \
+            new_cost[better]
+        lam[rows] = torch.where(better, lam[rows] / 3, lam[rows] * 4)
+        done = (better & (gain < tol)) | (lam[rows] > 1e8)
+        active[rows[done]] = False
+        info.iterations += 1
+        info.objective.append(float(cost.mean()))
+        info.active.append(int(active.sum()))
+    else:
+        info.converged = not bool(active.any())
+    return x, info
+
+
+def _objective(weight: Tensor, res: Tensor, loss: str) -> Tensor:
+    """Per-row objective of weighted residuals."""
+    return (weight * (res.abs() if loss == 'l1' else res * res)).sum(1)
+
+
+def _bound(value, name: str, x: Tensor, default: float) -> Tensor:
+    if value is None:
+        return torch.full_like(x, default)
+    value = torch.as_tensor(value, dtype=x.dtype, device=x.device)
+    if value.shape not in (x.shape[1:], x.shape):
+        raise ValueError(f"'{name}' must have shape [{x.size(1)}] or "
+                         f"{list(x.shape)}, got {list(value.shape)}")
+    if bool(torch.isnan(value).any()):
+        raise ValueError(f"'{name}' contains NaN")
+    return value.expand_as(x)
+
+
+def _residual(residual, x: Tensor, rows: Tensor) -> Tensor:
+    out = residual(x, rows)
+    if not isinstance(out, Tensor) or out.dim() != 2 \
+            or out.size(0) != rows.numel():
+        raise ValueError(f"'residual' must return [n, R] residuals for the "
+                         f"n = {rows.numel()} rows asked for, got "
+                         f"{getattr(out, 'shape', type(out).__name__)}")
+    return out.detach()
+
+
+def _jacobian(residual, x: Tensor, rows: Tensor) -> Tensor:
+    """(n, R, P) by forward-mode differentiation, all P directions in one
+    evaluation of the residuals on P stacked copies of the rows."""
+    n, num_params = x.shape
+    stacked = x.repeat(num_params, 1)
+    tangent = torch.eye(num_params, dtype=x.dtype, device=x.device
+                        ).repeat_interleave(n, 0)
+    with forward_ad.dual_level():
+        out = residual(forward_ad.make_dual(stacked, tangent),
+                       rows.repeat(num_params))
+        derivative = forward_ad.unpack_dual(out).tangent
+    if derivative is None:  # the residuals do not depend on x
+        return x.new_zeros(n, out.size(1), num_params)
+    return derivative.view(num_params, n, -1).permute(1, 2, 0)

@@ -830,7 +830,8 @@ def svbrdf_mitsuba(d, _):
         f"methods start from those images, on "
         f"{d['machine']['cpu_count']} CPU cores (`{d['variant']}`): the "
         f"paper's mixed recovery takes {method(mixed)} ("
-        + '; '.join(f"{lab.split(' (')[0]}: {method(lab)}" for lab in others)
+        + '; '.join(f"{re.sub(r' [(].*?[)]', '', lab)}: {method(lab)}"
+                    for lab in others)
         + f"; a constant 0.5 scores {constant['roughness_mae']:.3f} / "
         f"{constant['base_color_rmse']:.3f}); prb from constant 0.5 "
         f"({args['spp']} spp) reaches those errors in "

@@ -60,7 +60,7 @@ from tg_intrinsic.io import read_envmap  # noqa: E402
 from tg_intrinsic.nn import FrequencySVBRDF  # noqa: E402
 from tg_intrinsic.transforms import (FitSphericalHarmonics,  # noqa: E402
                                      SpectralUncertainty)
-from tg_intrinsic.utils import _atomic, atomic_write_json  # noqa: E402
+from tg_intrinsic.utils import atomic_write, atomic_write_json  # noqa: E402
 from tg_intrinsic.utils import machine_info  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -198,7 +198,7 @@ def plot(rows, envmaps, view_counts, path):
                      fontsize=9)
     axes[0].legend(fontsize=8)
     fig.tight_layout()
-    _atomic(path, lambda f: fig.savefig(f, format='png', dpi=120), 'wb')
+    atomic_write(path, lambda f: fig.savefig(f, format='png', dpi=120), 'wb')
 
 
 def main():

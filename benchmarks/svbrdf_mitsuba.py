@@ -9,7 +9,8 @@ images:
 
 - ours: ``ProjectViews`` -> ``FitSphericalHarmonics`` ->
   ``SpectralUncertainty`` -> ``FrequencySVBRDF.fit`` (the paper's mixed
-  recovery, initialised from the spectrum);
+  recovery, initialised from the spectrum), by Adam (the original's 300
+  steps) and by the per-point Levenberg-Marquardt solver;
 - Mitsuba: differentiable path replay (``prb``, direct light), Adam on the
   per-vertex base colour and roughness from 0.5, one random view per step.
 
@@ -44,7 +45,7 @@ from tg_intrinsic.io import read_envmap  # noqa: E402
 from tg_intrinsic.nn import FrequencySVBRDF  # noqa: E402
 from tg_intrinsic.transforms import (FitSphericalHarmonics,  # noqa: E402
                                      ProjectViews, SpectralUncertainty)
-from tg_intrinsic.utils import _atomic, atomic_write_json  # noqa: E402
+from tg_intrinsic.utils import atomic_write, atomic_write_json  # noqa: E402
 from tg_intrinsic.utils import machine_info  # noqa: E402
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), 'oracles'))
@@ -64,11 +65,15 @@ def errors(data, base_color, roughness):
                    ).mean().sqrt()))
 
 
-OURS = {'mixed (eq. 5.11, l* = 5)': (5, 'eq5.11'),
-        'split-sum (l* = 8)': (8, 'split_sum')}
+OURS = {'mixed (eq. 5.11, l* = 5), Adam': (5, 'eq5.11', 'adam'),
+        'mixed (eq. 5.11, l* = 5), LM': (5, 'eq5.11', 'lm'),
+        'split-sum (l* = 8), Adam': (8, 'split_sum', 'adam'),
+        'split-sum (l* = 8), LM': (8, 'split_sum', 'lm')}
 
 
-def ours(data, images, steps, l_max, model):
+def ours(data, images, steps, l_max, model, solver):
+    """Seconds of the whole recovery from the images, of its preparation
+    (projection, SH fits, spectrum) alone, and the errors."""
     capture = data.clone()
     capture.images = torch.as_tensor(images)
     for key in ('obs_radiance', 'obs_dir', 'obs_mask'):
@@ -77,11 +82,13 @@ def ours(data, images, steps, l_max, model):
     capture = ProjectViews()(capture)
     capture = SpectralUncertainty()(
         FitSphericalHarmonics(l_max=l_max)(capture))
+    prepared = time.perf_counter() - start
     result = FrequencySVBRDF(capture.num_nodes, specular_model=model).fit(
-        capture, steps=steps, lr=0.02, tv_weight=0.02, progress=False)
+        capture, steps=steps if solver == 'adam' else None, lr=0.02,
+        tv_weight=0.02, solver=solver, progress=False)
     seconds = time.perf_counter() - start
-    return seconds, errors(data, result.base_color.detach(),
-                           result.roughness.detach())
+    return seconds, prepared, errors(data, result.base_color.detach(),
+                                     result.roughness.detach())
 
 
 def mitsuba_fit(mi, dr, scene, sensors, references, data, budget, spp,
@@ -137,7 +144,7 @@ def plot(rows, variant, path):
             curve = row['mitsuba_curve']
             ax.plot([p['seconds'] for p in curve], [p[key] for p in curve],
                     color=colour, label=f"Mitsuba prb, {row['envmap']}")
-            for (label, result), marker in zip(row['ours'].items(), '*P'):
+            for (label, result), marker in zip(row['ours'].items(), '*PXD'):
                 ax.plot([result['seconds']], [result[key]], marker, ms=11,
                         color=colour, label=f"ours {label}, {row['envmap']}")
             ax.axhline(row['constant_0.5'][key], color=colour, lw=0.7,
@@ -148,7 +155,7 @@ def plot(rows, variant, path):
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc='lower center', ncol=4, fontsize=7)
     fig.tight_layout(rect=(0, 0.16, 1, 1))
-    _atomic(path, lambda f: fig.savefig(f, format='png', dpi=120), 'wb')
+    atomic_write(path, lambda f: fig.savefig(f, format='png', dpi=120), 'wb')
 
 
 def main():
@@ -217,10 +224,12 @@ def main():
                    errors(data, torch.full((data.num_nodes, 3), 0.5),
                           torch.full((data.num_nodes, ), 0.5)))),
                'ours': {}}
-        for label, (l_max, model) in OURS.items():
-            seconds, (rough, base) = ours(data, images, args.steps, l_max,
-                                          model)
-            row['ours'][label] = {'seconds': seconds, 'roughness_mae': rough,
+        for label, (l_max, model, solver) in OURS.items():
+            seconds, prepared, (rough, base) = ours(
+                data, images, args.steps, l_max, model, solver)
+            row['ours'][label] = {'seconds': seconds,
+                                  'preparation_seconds': prepared,
+                                  'roughness_mae': rough,
                                   'base_color_rmse': base}
             print(f'{name}: {data.num_nodes} vertices, {args.views} views '
                   f'of {size[0]}x{size[1]}; ours, {label}: {seconds:.1f} s, '

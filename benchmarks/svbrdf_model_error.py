@@ -39,7 +39,7 @@ from tg_intrinsic.geometry.appearance.envmap import (  # noqa: E402
     equirect_directions, equirect_solid_angles)
 from tg_intrinsic.nn import FrequencySVBRDF  # noqa: E402
 from tg_intrinsic.transforms import FitSphericalHarmonics  # noqa: E402
-from tg_intrinsic.utils import _atomic, atomic_write_json  # noqa: E402
+from tg_intrinsic.utils import atomic_write, atomic_write_json  # noqa: E402
 from tg_intrinsic.utils import machine_info  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -147,7 +147,7 @@ def main():
     axes[0].set_ylabel('relative L1 at the true parameters')
     axes[0].legend(fontsize=7)
     fig.tight_layout()
-    _atomic(os.path.join(out, 'svbrdf_model_error.png'),
+    atomic_write(os.path.join(out, 'svbrdf_model_error.png'),
             lambda f: fig.savefig(f, format='png', dpi=120), 'wb')
 
 

@@ -31,7 +31,7 @@ from tg_intrinsic.geometry.appearance.brdf import (lobe_filter,  # noqa
                                                    spectral_grid,
                                                    spectral_uncertainty)
 from tg_intrinsic.geometry.appearance.sh import fit_sh, real_sh  # noqa: E402
-from tg_intrinsic.utils import (_atomic, atomic_write_json,  # noqa: E402
+from tg_intrinsic.utils import (atomic_write, atomic_write_json,  # noqa: E402
                                 machine_info)
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'results')
@@ -165,7 +165,7 @@ def main():
         ax.set_title(title, fontsize=9)
         ax.legend()
     fig.tight_layout()
-    _atomic(os.path.join(RESULTS, 'svbrdf_speed.png'),
+    atomic_write(os.path.join(RESULTS, 'svbrdf_speed.png'),
             lambda f: fig.savefig(f, format='png', dpi=120), 'wb')
 
 

@@ -111,7 +111,19 @@ def test_subprocess_with_options(scene, tmp_path):
     report = json.loads((out / 'report.json').read_text())
     assert report['options']['l_max'] == 8  # split_sum's default
     assert report['options']['metallic'] == 1.0
+    assert report['options']['solver'] == 'adam'
     assert np.allclose(np.load(out / 'maps.npz')['metallic'], 1.0)
+
+
+def test_levenberg_marquardt_solver(scene, tmp_path):
+    from tg_intrinsic.nn.frequency_svbrdf import DEFAULT_STEPS
+    out = tmp_path / 'lm'
+    assert run(['svbrdf', str(scene), '--out', str(out), '--solver', 'lm',
+                '--quiet']) == 0
+    report = json.loads((out / 'report.json').read_text())
+    assert report['options']['solver'] == 'lm'
+    assert report['options']['steps'] == DEFAULT_STEPS['lm']
+    assert report['final_loss'] < report['initial_loss']
 
 
 def test_bad_input_is_one_line_with_exit_code_2(scene, tmp_path, capsys):
@@ -140,6 +152,8 @@ def test_bad_input_is_one_line_with_exit_code_2(scene, tmp_path, capsys):
                    "'base_color' has shape [5, 3]", '162 points')
     assert run(['svbrdf', str(scene), '--steps', '-3']) == 2
     one_line_error(capsys, '--steps', 'must be at least 0')
+    assert run(['svbrdf', str(scene), '--solver', 'newton']) == 2
+    one_line_error(capsys, '--solver', 'newton')
     assert run(['svbrdf', str(scene), '--metallic', '2']) == 2
     one_line_error(capsys, '--metallic', 'must lie in [0, 1]')
     assert run(['svbrdf']) == 2

@@ -67,7 +67,8 @@ def _unit_float(text: str) -> float:
 def add_arguments(parser):
     from tg_intrinsic.nn import FrequencySVBRDF
     from tg_intrinsic.transforms import FitSphericalHarmonics
-    steps = default_of(FrequencySVBRDF.fit, 'steps')
+    from tg_intrinsic.nn.frequency_svbrdf import DEFAULT_STEPS, SOLVERS
+    solver = default_of(FrequencySVBRDF.fit, 'solver')
     tv_weight = default_of(FrequencySVBRDF.fit, 'tv_weight')
     l_max = default_of(FitSphericalHarmonics.__init__, 'l_max')
     parser.add_argument('scene', nargs='?', metavar='SCENE_DIR',
@@ -75,11 +76,17 @@ def add_arguments(parser):
     parser.add_argument('--out', default=None, metavar='DIR',
                         help='output folder (default: runs/svbrdf_<SCENE_DIR'
                         ' name>)')
-    parser.add_argument('--steps', type=nonnegative_int, default=steps,
+    parser.add_argument('--solver', choices=SOLVERS, default=solver,
+                        help=f'adam: gradient descent on all points (the '
+                        f'original\'s); lm: Levenberg-Marquardt per point, '
+                        f'a lower objective sooner (default: {solver})')
+    parser.add_argument('--steps', type=nonnegative_int, default=None,
                         metavar='N',
-                        help=f'Adam steps of the fit; 0 keeps the spectrum '
-                        f'grid-search start (default: {steps}, the '
-                        f'library\'s)')
+                        help='Adam steps, or Levenberg-Marquardt iterations '
+                        'per round; 0 keeps the spectrum grid-search start '
+                        '(default: ' + ', '.join(
+                            f'{n} for {s}' for s, n in DEFAULT_STEPS.items())
+                        + ', the library\'s)')
     parser.add_argument('--l-max', type=positive_int, default=None,
                         metavar='L',
                         help=f'spherical-harmonic degree of the light and '
@@ -215,6 +222,7 @@ def recover(args) -> int:
     from tg_intrinsic.nn import FrequencySVBRDF
     from tg_intrinsic.transforms import (FitSphericalHarmonics,
                                          ProjectViews, SpectralUncertainty)
+    from tg_intrinsic.nn.frequency_svbrdf import DEFAULT_STEPS
     from tg_intrinsic.utils import atomic_write_json
 
     device = _device(args.device)
@@ -249,10 +257,12 @@ def recover(args) -> int:
         data = SpectralUncertainty(store_likelihood=False)(data)
     model = FrequencySVBRDF(data.num_nodes,
                             specular_model=args.specular_model).to(device)
-    with stage(f'fitting ({args.steps} steps)', args.quiet, seconds,
-                'fit'):
-        result = model.fit(data, steps=args.steps, tv_weight=args.tv_weight,
-                           metallic=args.metallic, progress=not args.quiet)
+    steps = DEFAULT_STEPS[args.solver] if args.steps is None else args.steps
+    with stage(f'fitting ({args.solver}, {steps} steps)', args.quiet,
+               seconds, 'fit'):
+        result = model.fit(data, steps=steps, tv_weight=args.tv_weight,
+                           metallic=args.metallic, solver=args.solver,
+                           progress=not args.quiet)
     with stage('writing', args.quiet, seconds, 'write'):
         maps = result.maps()
         files = _write_outputs(out, data, result, maps,
@@ -273,7 +283,7 @@ def recover(args) -> int:
             'min': int(seen.min()), 'median': float(seen.median()),
             'mean': round(float(seen.mean()), 3), 'max': int(seen.max()),
             'unseen_points': int((seen == 0).sum())},
-        'options': {'steps': args.steps, 'l_max': l_max,
+        'options': {'solver': args.solver, 'steps': steps, 'l_max': l_max,
                     'specular_model': args.specular_model,
                     'metallic': args.metallic, 'tv_weight': args.tv_weight,
                     'device': str(device), 'dtype': args.dtype},

@@ -20,7 +20,9 @@ from tg_intrinsic.geometry.checks import (check_choice,
 from tg_intrinsic.nn.svbrdf_result import SVBRDFResult
 from tg_intrinsic.solvers.levenberg_marquardt import levenberg_marquardt
 
-SOLVERS = ('lm', 'adam')
+SOLVERS = ('adam', 'lm')
+#: Adam steps, or Levenberg-Marquardt iterations per round, by default.
+DEFAULT_STEPS = {'adam': 200, 'lm': 20}
 # Longest Levenberg-Marquardt step of one parameter: the per-point
 # objective has a second minimum at a rough dielectric for rough metals
 # (and vice versa) that unbounded first steps jump into; measured on the
@@ -228,7 +230,7 @@ class FrequencySVBRDF(torch.nn.Module):
         """
         solver = check_choice(solver, 'solver', SOLVERS)
         if steps is None:
-            steps = 20 if solver == 'lm' else 200
+            steps = DEFAULT_STEPS[solver]
         steps = check_positive_int(steps, 'steps', minimum=0)
         lr = check_positive_float(lr, 'lr')
         shadowing_every = check_positive_int(shadowing_every,

@@ -137,7 +137,7 @@ def first_time(curve, targets):
 
 
 def plot(rows, variant, path):
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4.6))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5.6))
     for ax, key, title in ((axes[0], 'roughness_mae', 'roughness MAE'),
                            (axes[1], 'base_color_rmse', 'base colour RMSE')):
         for row, colour in zip(rows, ('C0', 'C1', 'C2')):
@@ -153,8 +153,8 @@ def plot(rows, variant, path):
         ax.set_xlabel(f'seconds ({variant})')
         ax.set_title(title, fontsize=9)
     handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc='lower center', ncol=4, fontsize=7)
-    fig.tight_layout(rect=(0, 0.16, 1, 1))
+    fig.legend(handles, labels, loc='lower center', ncol=3, fontsize=7)
+    fig.tight_layout(rect=(0, 0.26, 1, 1))
     atomic_write(path, lambda f: fig.savefig(f, format='png', dpi=120), 'wb')
 
 

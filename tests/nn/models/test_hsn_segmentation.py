@@ -1,67 +1,25 @@
-import math
-
 import pytest
 import torch
-from torch_geometric.data import Batch
 
 from tg_intrinsic.nn.models import HSNSegmentation
+from tests.nn.models.hsn_checks import (check_batched_equals_per_example,
+                                        check_constructors_need_positive_sizes,
+                                        check_gauge_invariance)
 from tests.conftest import rel
 from tests.nn.conftest import RINGS, permute_points, two_level_data
 
 
 @pytest.mark.parametrize('max_order', [1, 2])
 def test_predictions_are_gauge_invariant(max_order):
-    gen = torch.Generator().manual_seed(9)
-    angle0 = torch.rand(50, dtype=torch.float64, generator=gen) * 2 * math.pi
-    angle1 = torch.rand(12, dtype=torch.float64, generator=gen) * 2 * math.pi
-    torch.manual_seed(0)
-    model = HSNSegmentation(3, 5, channels=(4, 6), max_order=max_order,
-                            rings=RINGS).double()
-    model.eval()
-    with torch.no_grad():
-        for p in model.parameters():  # no trivial zero outputs
-            p.add_(0.05 * torch.randn_like(p))
-    out = model(two_level_data(1, max_order=max_order))
-    out2 = model(two_level_data(1, angle0=angle0, angle1=angle1,
-                                max_order=max_order))
-    assert out.abs().max() > 1e-3
-    assert rel(out2, out) < 1e-8
-    # training mode (batch statistics) too, with gradients
-    model.train()
-    out = model(two_level_data(1, max_order=max_order))
-    grads = torch.autograd.grad(out.square().sum(), model.parameters())
-    out2 = model(two_level_data(1, angle0=angle0, angle1=angle1,
-                                max_order=max_order))
-    grads2 = torch.autograd.grad(out2.square().sum(), model.parameters())
-    assert rel(out2, out) < 1e-8
-    for a, b in zip(grads2, grads):
-        assert rel(a, b) < 1e-7
+    check_gauge_invariance(HSNSegmentation, max_order)
 
 
 def test_batched_equals_per_example():
-    torch.manual_seed(0)
-    model = HSNSegmentation(3, 5, channels=(4, 6), max_order=1,
-                            rings=RINGS).double()
-    model.eval()
-    data = [two_level_data(s, max_order=1) for s in (1, 2, 3)]
-    batch = Batch.from_data_list(data)
-    out = model(batch)
-    single = torch.cat([model(d) for d in data])
-    assert rel(out, single) < 1e-10
-    assert out.shape == (150, 5)
+    check_batched_equals_per_example(HSNSegmentation, (150, 5))
 
 
 def test_constructors_need_positive_sizes():
-    with pytest.raises(ValueError, match="'in_channels' must be at least 1"):
-        HSNSegmentation(0, 5)
-    with pytest.raises(ValueError, match="'num_classes' must be at least 1"):
-        HSNSegmentation(3, 0)
-    with pytest.raises(ValueError, match="'channels' must hold exactly 2"):
-        HSNSegmentation(3, 5, channels=(4, ))
-    with pytest.raises(ValueError, match=r"'channels\[1\]' must be at least"):
-        HSNSegmentation(3, 5, channels=(4, 0))
-    with pytest.raises(ValueError, match="'rings' must be at least 1"):
-        HSNSegmentation(3, 5, rings=0)
+    check_constructors_need_positive_sizes(HSNSegmentation)
 
 
 def test_logits_follow_the_points_when_they_are_reordered():

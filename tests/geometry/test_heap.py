@@ -10,38 +10,37 @@ from tg_intrinsic.geometry.heap import sift_down, sift_up
 
 
 @njit(cache=True)
+def pop(hd, hv, size):
+    """Removes the smallest entry; returns it and the new size."""
+    key, value = hd[0], hv[0]
+    size -= 1
+    hd[0] = hd[size]
+    hv[0] = hv[size]
+    sift_down(hd, hv, 0, size)
+    return key, value, size
+
+
+@njit(cache=True)
 def run_operations(keys, pops):
-    """Pushes keys[k] with value k; after push k pops pops[k] entries."""
+    """Pushes keys[k] with value k; after push k pops pops[k] entries, then
+    pops the rest."""
     n = keys.size
     hd = np.empty(n)
     hv = np.empty(n, dtype=np.int64)
-    size = 0
     out_keys = np.empty(n)
     out_values = np.empty(n, dtype=np.int64)
-    count = 0
-    for k in range(n):
-        hd[size] = keys[k]
-        hv[size] = k
-        size += 1
-        sift_up(hd, hv, size - 1)
-        for _ in range(pops[k]):
-            if size == 0:
-                break
-            out_keys[count] = hd[0]
-            out_values[count] = hv[0]
+    size = count = 0
+    for k in range(n + 1):
+        if k < n:
+            hd[size] = keys[k]
+            hv[size] = k
+            size += 1
+            sift_up(hd, hv, size - 1)
+        wanted = pops[k] if k < n else n
+        while wanted > 0 and size > 0:
+            out_keys[count], out_values[count], size = pop(hd, hv, size)
             count += 1
-            size -= 1
-            hd[0] = hd[size]
-            hv[0] = hv[size]
-            sift_down(hd, hv, 0, size)
-    while size > 0:
-        out_keys[count] = hd[0]
-        out_values[count] = hv[0]
-        count += 1
-        size -= 1
-        hd[0] = hd[size]
-        hv[0] = hv[size]
-        sift_down(hd, hv, 0, size)
+            wanted -= 1
     return out_keys, out_values
 
 

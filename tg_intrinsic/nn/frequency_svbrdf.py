@@ -9,8 +9,8 @@ from torch_geometric.data import Data
 
 from tg_intrinsic.geometry import knn, mesh_edges
 from tg_intrinsic.geometry.appearance.brdf import (
-    MIN_ALPHA, dominant_direction, lobe_degree_sums, principled_reflectance,
-    principled_reflectance_jacobian, sh_reflectance)
+    MIN_ALPHA, dominant_direction, lobe_degree_sums, model_alpha,
+    principled_reflectance, principled_reflectance_jacobian, sh_reflectance)
 from tg_intrinsic.geometry.appearance.sh import (fit_light,
                                                  light_directions, real_sh,
                                                  smith_g1)
@@ -144,7 +144,7 @@ class FrequencySVBRDF(torch.nn.Module):
         light = data.light_radiance.to(dtype)
         l_max = int(round(math.sqrt(data.sh_in.size(1)))) - 1
         local = light_directions(light.size(1), dtype, light.device)
-        alpha = (self.roughness.detach().to(dtype) ** 2).clamp_min(MIN_ALPHA)
+        alpha = model_alpha(self.roughness.detach().to(dtype))
         shadow = smith_g1(local[:, 2].unsqueeze(0), alpha.unsqueeze(-1))
         regularizer = float(data.sh_regularizer.reshape(-1)[0])
         return fit_light(local, shadow.unsqueeze(-1) * light, l_max,
@@ -294,11 +294,7 @@ class FrequencySVBRDF(torch.nn.Module):
                          desc='FrequencySVBRDF'):
             if step % shadowing_every == 0:
                 problem.refresh()
-            loss = problem.loss(self.base_color, self.metallic,
-                                self.roughness)
-            if problem.edges is not None:
-                loss = loss + problem.tv_weight * self.total_variation(
-                    problem.edges)
+            loss = problem.objective()
             if not bool(torch.isfinite(loss)):
                 raise RuntimeError(f"the loss became {float(loss)} at step "
                                    f"{step}; check the observations for "
@@ -314,36 +310,32 @@ class FrequencySVBRDF(torch.nn.Module):
 
     def _fit_lm(self, problem, steps, rounds, metallic, progress):
         from tqdm.auto import tqdm
-        fixed = metallic is not None
-        lower = torch.tensor([0.0, 0.0, 0.0] + ([] if fixed else [0.0])
-                             + [math.sqrt(MIN_ALPHA)])
+        # unknowns: base colour (3), metallic unless held, roughness
+        columns = [0, 1, 2, 4] if metallic is not None else [0, 1, 2, 3, 4]
+        lower = torch.tensor([0.0, 0.0, 0.0, 0.0, math.sqrt(MIN_ALPHA)]
+                             )[columns]
         history = []
         for _ in tqdm(range(rounds if steps > 0 else 0),
                       disable=not progress, desc='FrequencySVBRDF'):
             problem.refresh()
             with torch.no_grad():
-                loss = problem.loss(self.base_color, self.metallic,
-                                    self.roughness)
-                if problem.edges is not None:
-                    loss = loss + problem.tv_weight * self.total_variation(
-                        problem.edges)
-                history.append(float(loss))
-            x0 = [self.base_color.detach()]
-            if not fixed:
-                x0.append(self.metallic.detach().unsqueeze(-1))
-            x0.append(self.roughness.detach().unsqueeze(-1))
-            x0 = torch.cat(x0, 1).to(problem.dtype)
-            residual, jacobian = problem.residual(fixed)
+                history.append(float(problem.objective()))
+                every = torch.cat([self.base_color,
+                                   self.metallic.unsqueeze(-1),
+                                   self.roughness.unsqueeze(-1)], 1)
+            x0 = every[:, columns].to(problem.dtype)
+            residual, jacobian = problem.residual(x0, columns)
             x, _ = levenberg_marquardt(
-                residual, x0, problem.point_weight(x0.size(1)), lower.to(x0),
-                torch.ones_like(lower).to(x0), loss='l1', max_iter=steps,
-                tol=1e-4, l1_epsilon=1e-3 * problem.radiance_scale,
-                jacobian=jacobian, max_step=MAX_STEP)
+                residual, x0, problem.point_weight(len(columns)),
+                lower.to(x0), torch.ones_like(lower).to(x0), loss='l1',
+                max_iter=steps, tol=1e-4,
+                l1_epsilon=1e-3 * problem.radiance_scale, jacobian=jacobian,
+                max_step=MAX_STEP)
             with torch.no_grad():
-                self.base_color.copy_(x[:, :3])
-                if not fixed:
-                    self.metallic.copy_(x[:, 3])
-                self.roughness.copy_(x[:, -1])
+                every[:, columns] = x.to(every)
+                self.base_color.copy_(every[:, :3])
+                self.metallic.copy_(every[:, 3])
+                self.roughness.copy_(every[:, 4])
         if not history:
             problem.refresh()
         return history
@@ -444,6 +436,14 @@ class _Problem:
         error = self.predict(base_color, metallic, roughness) - self.target
         return (self.weight * error.abs()).sum() / self.normaliser
 
+    def objective(self) -> Tensor:
+        """The model's data loss plus its total variation, if any."""
+        model = self.model
+        loss = self.loss(model.base_color, model.metallic, model.roughness)
+        if self.edges is not None:
+            loss = loss + self.tv_weight * model.total_variation(self.edges)
+        return loss
+
     def point_weight(self, num_params: int) -> Tensor:
         """Weights of the residuals of :meth:`residual`, per point: the
         observations', then the total variation's (each edge pulls on both
@@ -458,18 +458,14 @@ class _Problem:
         tv = tv.repeat_interleave(num_params, 1)
         return torch.cat([w, tv], 1)
 
-    def residual(self, fixed_metallic: bool):
-        """The residuals of the points ``rows`` at parameters ``x`` (base
-        colour, metallic unless fixed, roughness), and a function that
-        also returns their Jacobian."""
-        model = self.model
-        metallic = model.metallic.detach().to(self.dtype)
-        columns = [0, 1, 2, 4] if fixed_metallic else [0, 1, 2, 3, 4]
-        # the neighbours' values of the previous round (block Jacobi)
-        current = torch.cat([model.base_color.detach(),
-                             model.metallic.detach().unsqueeze(-1),
-                             model.roughness.detach().unsqueeze(-1)], 1
-                            )[:, columns].to(self.dtype)
+    def residual(self, current: Tensor, columns):
+        """The residuals of the points ``rows`` at parameters ``x``, the
+        ``columns`` of (base colour, metallic, roughness) that are fitted,
+        and a function that also returns their Jacobian. ``current`` holds
+        every point's values of the previous round, which the total
+        variation pulls towards (block Jacobi)."""
+        metallic = self.model.metallic.detach().to(self.dtype)
+        fixed_metallic = 3 not in columns
 
         def arguments(x, rows):
             m = metallic[rows] if fixed_metallic else x[:, 3]

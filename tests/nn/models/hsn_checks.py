@@ -63,3 +63,22 @@ def check_constructors_need_positive_sizes(model_class):
         model_class(3, 5, channels=(4, 0))
     with pytest.raises(ValueError, match="'rings' must be at least 1"):
         model_class(3, 5, rings=0)
+
+
+#: A key the models need, removed, and what the error must say.
+MISSING_LEVELS = [
+    ('cluster_1', "the data lacks 'cluster_1'; build the pooling levels "
+                  "with MultiscaleSupports"),
+    ('pool_transport_1', "the data lacks 'pool_transport_1'"),
+    ('transport', r"the data lacks \['transport'\]; build it with LogMap"),
+    ('edge_index_1', r"the data lacks \['edge_index_1'\]"),
+]
+
+
+def check_missing_level_is_explained(model_class, key, match):
+    model = model_class(3, 5, channels=(4, 6), max_order=1,
+                        rings=RINGS).double()
+    data = two_level_data(1, max_order=1)
+    del data[key]
+    with pytest.raises(ValueError, match=match):
+        model(data)

@@ -2,9 +2,11 @@ import pytest
 import torch
 
 from tg_intrinsic.nn.models import HSNClassification
-from tests.nn.models.hsn_checks import (check_batched_equals_per_example,
+from tests.nn.models.hsn_checks import (MISSING_LEVELS,
+                                        check_batched_equals_per_example,
                                         check_constructors_need_positive_sizes,
-                                        check_gauge_invariance)
+                                        check_gauge_invariance,
+                                        check_missing_level_is_explained)
 from tests.conftest import rel
 from tests.nn.conftest import RINGS, permute_points, two_level_data
 
@@ -65,17 +67,6 @@ def test_repr():
                            'max_order=2, rings=4)')
 
 
-@pytest.mark.parametrize('key,match', [
-    ('cluster_1', "the data lacks 'cluster_1'; build the pooling levels "
-                  "with MultiscaleSupports"),
-    ('pool_transport_1', "the data lacks 'pool_transport_1'"),
-    ('transport', r"the data lacks \['transport'\]; build it with LogMap"),
-    ('edge_index_1', r"the data lacks \['edge_index_1'\]"),
-])
+@pytest.mark.parametrize('key,match', MISSING_LEVELS)
 def test_missing_levels_are_explained(key, match):
-    model = HSNClassification(3, 5, channels=(4, 6), max_order=1,
-                              rings=RINGS).double()
-    data = two_level_data(1, max_order=1)
-    del data[key]
-    with pytest.raises(ValueError, match=match):
-        model(data)
+    check_missing_level_is_explained(HSNClassification, key, match)

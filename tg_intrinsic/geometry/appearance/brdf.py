@@ -25,6 +25,15 @@ from .sh import (num_coefficients, power_spectrum, real_sh, schlick_fresnel,
 MIN_ALPHA = 1e-3
 
 
+def model_alpha(roughness: Tensor) -> Tensor:
+    r"""GGX width :math:`\alpha = r^2` of the model, at least
+    :data:`MIN_ALPHA`. The floor keeps the gradient of :math:`r^2`: a hard
+    clamp would zero it and strand a fit that touches the floor there for
+    good."""
+    alpha = roughness * roughness
+    return alpha + (MIN_ALPHA - alpha).clamp_min(0).detach()
+
+
 def reflect(directions: Tensor, normals: Tensor) -> Tensor:
     r"""Mirror directions :math:`2 (n \cdot \omega) n - \omega`."""
     return 2 * (directions * normals).sum(-1, keepdim=True) * normals \
@@ -241,10 +250,7 @@ def principled_reflectance(degree_sums: Tensor, irradiance: Tensor,
     Returns:
         :math:`(N, V, 3)`.
     """
-    alpha = roughness * roughness
-    # the floor keeps the gradient of r^2: a hard clamp would zero it and
-    # strand a fit that touches the floor there for good
-    alpha = alpha + (MIN_ALPHA - alpha).clamp_min(0).detach()
+    alpha = model_alpha(roughness)
     lobe = lobe_filter(degree_sums.size(-1) - 1, alpha, prefilter_alpha,
                        per_degree=True)
     specular = (degree_sums @ lobe[:, None, :, None]).squeeze(-1)
@@ -285,8 +291,7 @@ def principled_reflectance_jacobian(
     n, v = mirror_dir.shape[:2]
     with forward_ad.dual_level():
         rough = forward_ad.make_dual(roughness, torch.ones_like(roughness))
-        alpha = rough * rough
-        alpha = alpha + (MIN_ALPHA - alpha).clamp_min(0).detach()
+        alpha = model_alpha(rough)
         lobe = forward_ad.unpack_dual(lobe_filter(
             degree_sums.size(-1) - 1, alpha, prefilter_alpha,
             per_degree=True))

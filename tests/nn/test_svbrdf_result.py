@@ -121,3 +121,71 @@ def test_point_maps_need_positions(tmp_path):
     with pytest.raises(ValueError, match="saving point maps as images needs "
                                          "'pos'"):
         result().save(str(tmp_path))
+
+
+# ------------------------------------------------------ merge by entropy
+def test_merge_by_entropy_takes_each_point_from_the_most_certain():
+    inputs = [result(n=50, seed=s) for s in range(4)]
+    # ties: the first of the tied inputs wins
+    inputs[2].entropy[:5] = inputs[0].entropy[:5]
+    inputs[0].entropy[:5] = 0.0
+    inputs[3].entropy[:5] = 0.0
+    merged, source = SVBRDFResult.merge_by_entropy(inputs)
+    assert source.dtype == torch.long and source.shape == (50, )
+    for i in range(50):  # brute force, point by point
+        values = [r.entropy[i].item() for r in inputs]
+        best = values.index(min(values))
+        assert source[i].item() == best
+        for name in ('base_color', 'metallic', 'roughness', 'entropy'):
+            torch.testing.assert_close(getattr(merged, name)[i],
+                                       getattr(inputs[best], name)[i])
+    assert (source[:5] == 0).all()
+    assert merged.seconds == pytest.approx(4 * 0.5)
+    assert merged.loss == [] and merged.texture_shape is None
+    # one input is itself
+    alone, which = SVBRDFResult.merge_by_entropy([inputs[1]])
+    assert (which == 0).all()
+    torch.testing.assert_close(alone.roughness, inputs[1].roughness)
+
+
+def test_merge_by_entropy_is_symmetric_under_permuting_the_inputs():
+    inputs = [result(n=40, seed=s) for s in range(5)]  # no ties
+    merged, source = SVBRDFResult.merge_by_entropy(inputs)
+    order = [3, 0, 4, 1, 2]
+    permuted, permuted_source = SVBRDFResult.merge_by_entropy(
+        [inputs[k] for k in order])
+    for name in ('base_color', 'metallic', 'roughness', 'entropy'):
+        torch.testing.assert_close(getattr(permuted, name),
+                                   getattr(merged, name))
+    assert torch.equal(torch.tensor(order)[permuted_source], source)
+
+
+def test_merge_by_entropy_keeps_the_texture_shape():
+    inputs = [result(n=6, seed=s, texture_shape=(2, 3)) for s in range(2)]
+    merged, _ = SVBRDFResult.merge_by_entropy(inputs)
+    assert merged.texture_shape == (2, 3)
+    assert merged.maps()['roughness'].shape == (2, 3)
+
+
+def test_merge_by_entropy_rejects_bad_inputs():
+    with pytest.raises(ValueError, match='non-empty'):
+        SVBRDFResult.merge_by_entropy([])
+    with pytest.raises(ValueError, match='non-empty'):
+        SVBRDFResult.merge_by_entropy(r for r in [result()])
+    with pytest.raises(ValueError, match='not an SVBRDFResult'):
+        SVBRDFResult.merge_by_entropy([result(), {'roughness': 1}])
+    with pytest.raises(ValueError, match='same 6 points'):
+        SVBRDFResult.merge_by_entropy([result(n=6), result(n=7)])
+    short = result(n=6)
+    short.base_color = short.base_color[:5]
+    with pytest.raises(ValueError, match=r'results\[1\].base_color'):
+        SVBRDFResult.merge_by_entropy([result(n=6), short])
+    with pytest.raises(ValueError, match='no entropy'):
+        SVBRDFResult.merge_by_entropy([result(), result(entropy=False)])
+    nan = result()
+    nan.entropy[2] = float('nan')
+    with pytest.raises(ValueError, match='NaN'):
+        SVBRDFResult.merge_by_entropy([result(), nan])
+    with pytest.raises(ValueError, match='texture_shape'):
+        SVBRDFResult.merge_by_entropy([result(), result(
+            texture_shape=(2, 3))])

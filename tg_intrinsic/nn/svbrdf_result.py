@@ -125,6 +125,86 @@ class SVBRDFResult:
             paths.append(path)
         return paths
 
+    @classmethod
+    def merge_by_entropy(cls, results: List['SVBRDFResult']
+                         ) -> Tuple['SVBRDFResult', Tensor]:
+        r"""Merges recoveries of the same points (e.g. the same object
+        under several lightings) by taking, at every point, the parameters
+        of the recovery that is most certain there (Wiersma et al.,
+        "Uncertainty for SVBRDF Acquisition using Frequency Analysis",
+        SIGGRAPH 2025, Table 5.6),
+
+        .. math::
+            s_i = \operatorname*{arg\,min}_{k} H_k(i), \qquad
+            x_i = x_{s_i}(i) \quad \text{for } x \in \{b, m, r, H\},
+
+        the first input winning ties. No ground truth is used: the entropy
+        alone decides.
+
+        Args:
+            results (sequence of SVBRDFResult): At least one, all with the
+                same number of points (and texture shape) and a finite
+                :obj:`entropy`.
+
+        Returns:
+            ``(merged, source)``: the merged :class:`SVBRDFResult` (its
+            :obj:`entropy` the per-point minimum, :obj:`seconds` the sum of
+            the inputs', :obj:`loss` empty, as no single objective was
+            minimised) and ``source`` :math:`(N)` (long), the index into
+            :obj:`results` each point was taken from.
+        """
+        results = list(results) if isinstance(results, (list, tuple)) \
+            else None
+        if not results:
+            raise ValueError("'results' must be a non-empty list or tuple "
+                             "of SVBRDFResult")
+        num = None
+        for k, res in enumerate(results):
+            if not isinstance(res, cls):
+                raise ValueError(f"results[{k}] is a {type(res).__name__}, "
+                                 f"not an SVBRDFResult")
+            if res.entropy is None:
+                raise ValueError(f"results[{k}] has no entropy; run "
+                                 f"SpectralUncertainty before the fit so "
+                                 f"that the merge can compare certainty")
+            if num is None:
+                num = res.roughness.size(0)
+            shapes = {'base_color': (num, 3), 'metallic': (num, ),
+                      'roughness': (num, ), 'entropy': (num, )}
+            for name, shape in shapes.items():
+                if tuple(getattr(res, name).shape) != shape:
+                    raise ValueError(
+                        f"results[{k}].{name} has shape "
+                        f"{list(getattr(res, name).shape)}, expected "
+                        f"{list(shape)}: every result must cover the same "
+                        f"{num} points (results[0] has {num})")
+            if not bool(torch.isfinite(res.entropy).all()):
+                raise ValueError(f"results[{k}].entropy holds NaN or "
+                                 f"infinite values; a point without an "
+                                 f"uncertainty cannot be compared")
+            if res.texture_shape != results[0].texture_shape:
+                raise ValueError(f"results[{k}] has texture_shape "
+                                 f"{res.texture_shape}, results[0] "
+                                 f"{results[0].texture_shape}")
+        device = results[0].entropy.device
+        entropy = torch.stack([r.entropy.detach().to(device)
+                               for r in results])  # (R, N)
+        # argmin returns the first minimum: ties go to the earlier input
+        source = entropy.argmin(0)
+        points = torch.arange(num, device=device)
+
+        def pick(name):
+            maps = torch.stack([getattr(r, name).detach().to(device)
+                                for r in results])
+            return maps[source, points]
+
+        merged = cls(base_color=pick('base_color'),
+                     metallic=pick('metallic'), roughness=pick('roughness'),
+                     entropy=entropy[source, points],
+                     seconds=sum(r.seconds for r in results),
+                     texture_shape=results[0].texture_shape)
+        return merged, source
+
 
 def _write_png(f, image):
     import matplotlib.pyplot as plt

@@ -15,6 +15,7 @@ from .gravo_hierarchy import GravoHierarchy
 from .project_views import ProjectViews
 from .fit_spherical_harmonics import FitSphericalHarmonics
 from .spectral_uncertainty import SpectralUncertainty
+from .select_views import SelectViews, keep_views
 from .clean_mesh import CleanMesh
 from .decimate import Decimate
 from .farthest_point_resample import FarthestPointResample
@@ -23,5 +24,6 @@ __all__ = ['EstimateNormals', 'TangentFrames', 'MLSOperators',
            'RandomRotation', 'RandomAxisScale', 'RandomTranslation',
            'NormalizeArea', 'LogMap', 'ParallelTransport',
            'MultiscaleSupports', 'HarmonicPrecompute', 'GravoHierarchy', 'ProjectViews',
-           'FitSphericalHarmonics', 'SpectralUncertainty', 'CleanMesh',
+           'FitSphericalHarmonics', 'SpectralUncertainty', 'SelectViews',
+           'keep_views', 'CleanMesh',
            'Decimate', 'FarthestPointResample']

@@ -1,6 +1,7 @@
 r"""Appearance: spherical harmonics, BRDF terms and their spectra,
 environment maps, pinhole cameras, the reference lighting integral and the
-rasteriser with point visibility."""
+rasteriser with point visibility, and the greedy choice of views by
+expected entropy reduction."""
 from .sh import (real_sh, fit_sh, power_spectrum, fibonacci_sphere,
                  light_directions, light_fit_matrix, schlick_fresnel,
                  smith_g1, principled_to_torrance_sparrow,
@@ -10,6 +11,7 @@ from .envmap import (check_envmap, equirect_lookup, envmap_to_sh,
 from .cameras import camera_centers, project, look_at_cameras
 from .lighting import render_radiance
 from .raster import rasterize, point_visibility
+from .view_selection import select_views
 
 __all__ = ['real_sh', 'fit_sh', 'power_spectrum', 'fibonacci_sphere',
            'light_directions', 'light_fit_matrix',
@@ -17,4 +19,5 @@ __all__ = ['real_sh', 'fit_sh', 'power_spectrum', 'fibonacci_sphere',
            'torrance_sparrow_to_principled', 'check_envmap',
            'equirect_lookup', 'envmap_to_sh', 'sh_to_envmap', 'irradiance',
            'sun_sky_envmap', 'camera_centers', 'project', 'look_at_cameras',
-           'render_radiance', 'rasterize', 'point_visibility']
+           'render_radiance', 'rasterize', 'point_visibility',
+           'select_views']

@@ -18,10 +18,11 @@ from .spectral_uncertainty import SpectralUncertainty
 from .clean_mesh import CleanMesh
 from .decimate import Decimate
 from .farthest_point_resample import FarthestPointResample
+from .texture_texels import TextureTexels
 
 __all__ = ['EstimateNormals', 'TangentFrames', 'MLSOperators',
            'RandomRotation', 'RandomAxisScale', 'RandomTranslation',
            'NormalizeArea', 'LogMap', 'ParallelTransport',
            'MultiscaleSupports', 'HarmonicPrecompute', 'GravoHierarchy', 'ProjectViews',
            'FitSphericalHarmonics', 'SpectralUncertainty', 'CleanMesh',
-           'Decimate', 'FarthestPointResample']
+           'Decimate', 'FarthestPointResample', 'TextureTexels']

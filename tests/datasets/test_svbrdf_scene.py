@@ -162,6 +162,19 @@ def test_upper_hemisphere_and_mesh_inputs():
     torch.testing.assert_close(d2.envmap, env)
 
 
+def test_uv_sphere_carries_its_uvs():
+    from tg_intrinsic.geometry.texture import uv_sphere
+    d = svbrdf_scene('uv_sphere', render_images=False,
+                     **{**SMALL, 'resolution': 4, 'num_views': 3})
+    pos, face, uv = uv_sphere(4, 8)
+    assert torch.equal(d.face, face)
+    torch.testing.assert_close(d.pos, pos.float())
+    torch.testing.assert_close(d.uv, uv.float())
+    torch.testing.assert_close(d.normal, d.pos)  # exact, not faceted
+    assert 'uv' not in svbrdf_scene(render_images=False,
+                                    **{**SMALL, 'num_views': 3})
+
+
 @pytest.mark.skipif(not os.path.exists(os.path.join(MESHES, 'koala.obj')),
                     reason='real meshes are not available')
 def test_real_mesh():

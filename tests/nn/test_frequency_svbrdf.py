@@ -200,3 +200,132 @@ def test_bad_input():
     broken.obs_mask[0, 0] = True
     with pytest.raises(ValueError, match='NaN or infinite radiance'):
         FrequencySVBRDF(30).fit(broken, steps=3, progress=False)
+
+
+def texel_data(texture_shape=(12, 24), num_views=30, noise=0.3, seed=0):
+    """Self-consistent observations of the texels of a UV sphere
+    (TextureTexels) seen from cameras around it, of a metal whose
+    roughness and base colour are piecewise constant in the texture (the
+    left half differs from the right), with multiplicative noise."""
+    from torch_geometric.data import Data
+    from tg_intrinsic.geometry.appearance.sh import fibonacci_sphere
+    from tg_intrinsic.geometry.texture import uv_sphere
+    from tg_intrinsic.transforms import TextureTexels
+    from tests.conftest import sky_envmap
+    pos, face, uv = uv_sphere(6, 12)
+    data = TextureTexels(texture_shape, keep_mesh=False)(
+        Data(pos=pos, face=face, uv=uv, normal=pos.clone()))
+    to_cam = 3 * fibonacci_sphere(num_views, dtype=torch.float64)[None] \
+        - data.pos[:, None]
+    data.obs_dir = to_cam / to_cam.norm(dim=-1, keepdim=True)
+    data.obs_mask = (data.obs_dir * data.normal[:, None]).sum(-1) > 0.05
+    data.obs_radiance = torch.zeros(data.num_nodes, num_views, 3,
+                                    dtype=torch.float64)
+    data.envmap = sky_envmap()
+    data = FitSphericalHarmonics()(data)
+    left = (data.texel_index % texture_shape[1]
+            < texture_shape[1] // 2).double()
+    roughness = 0.3 + 0.4 * left
+    base = torch.stack([0.8 - 0.4 * left, 0.5 + 0 * left, 0.3 + 0.4 * left],
+                       -1)
+    truth = FrequencySVBRDF(data.num_nodes)
+    with torch.no_grad():
+        truth.base_color.copy_(base)
+        truth.metallic.fill_(1.0)
+        truth.roughness.copy_(roughness)
+        radiance = truth(data, truth.shadowed_light(data))
+    g = torch.Generator().manual_seed(seed)
+    radiance = radiance * (1 + noise * torch.randn(
+        radiance.shape, dtype=torch.float64, generator=g)).clamp_min(0)
+    data.obs_radiance = torch.where(data.obs_mask.unsqueeze(-1), radiance,
+                                    torch.zeros_like(radiance))
+    return FitSphericalHarmonics()(data), (base, roughness)
+
+
+def grid_pairs(texel_index, width):
+    """Brute force: every ordered pair (j, i) of points whose texels share
+    a side."""
+    where = {int(t): i for i, t in enumerate(texel_index)}
+    pairs = set()
+    for t, i in where.items():
+        r, c = divmod(t, width)
+        for rr, cc in ((r, c - 1), (r, c + 1), (r - 1, c), (r + 1, c)):
+            if 0 <= cc < width and rr * width + cc in where:
+                pairs.add((where[rr * width + cc], i))
+    return pairs
+
+
+def test_texels_regularise_along_the_texture_grid():
+    data, (base, roughness) = texel_data()
+    assert data.num_nodes < 12 * 24  # the caps leave texels uncovered
+    model = FrequencySVBRDF(data.num_nodes)
+    edges = model._graph(data, 8)
+    assert set(map(tuple, edges.t().tolist())) == grid_pairs(
+        data.texel_index.tolist(), 24)
+    # the grid's total variation recovers the piecewise-constant maps
+    # from noisy observations better than none (measured: roughness MAE
+    # 0.089 -> 0.011, base colour RMSE 0.13 -> 0.043)
+    plain = model.fit(data, steps=100, lr=0.03, progress=False)
+    smooth = FrequencySVBRDF(data.num_nodes).fit(data, steps=100, lr=0.03,
+                                                 tv_weight=0.05,
+                                                 progress=False)
+    for result in (plain, smooth):
+        assert result.texture_shape == (12, 24)
+        assert torch.equal(result.texel_index, data.texel_index)
+    error = [float((r.roughness - roughness).abs().mean())
+             for r in (plain, smooth)]
+    colour = [float(((r.base_color - base) ** 2).mean().sqrt())
+              for r in (plain, smooth)]
+    assert error[1] < 0.3 * error[0]
+    assert colour[1] < 0.5 * colour[0]
+    # Levenberg-Marquardt pulls along the same grid
+    lm_plain = model.fit(data, solver='lm', rounds=2, progress=False)
+    tv_plain = float(model.total_variation(edges).detach())
+    lm_smooth = model.fit(data, solver='lm', rounds=2, tv_weight=0.05,
+                          progress=False)
+    assert float(model.total_variation(edges).detach()) < 0.8 * tv_plain
+    assert lm_smooth.texel_index is not None and lm_plain.loss
+
+
+def test_every_texel_in_order_needs_no_texel_index():
+    data, _ = self_consistent_data(24, 8)
+    model = FrequencySVBRDF(24, texture_shape=(4, 6))
+    edges = model._graph(data, 8)
+    assert set(map(tuple, edges.t().tolist())) == grid_pairs(range(24), 6)
+    result = model.fit(data, steps=2, tv_weight=0.1, progress=False)
+    assert result.texel_index is None and result.texture_shape == (4, 6)
+    assert result.maps()['roughness'].shape == (4, 6)
+    # a subset of a larger texture, by the model's texture_shape
+    data.texel_index = torch.arange(24) * 2
+    subset = FrequencySVBRDF(24, texture_shape=(6, 8))
+    assert set(map(tuple, subset._graph(data, 8).t().tolist())) \
+        == grid_pairs((torch.arange(24) * 2).tolist(), 8)
+
+
+def test_texel_bad_input():
+    data, _ = self_consistent_data(24, 8)
+    with pytest.raises(ValueError, match=r'H \* W >= num_points'):
+        FrequencySVBRDF(24, texture_shape=(4, 5))
+    with pytest.raises(ValueError, match="'texture_shape"):
+        FrequencySVBRDF(24, texture_shape=(0, 30))
+    with pytest.raises(ValueError, match="give 'data.texel_index'"):
+        FrequencySVBRDF(24, texture_shape=(5, 5)).fit(data, steps=1,
+                                                      progress=False)
+    texels = data.clone()
+    texels.texel_index = torch.arange(24)
+    with pytest.raises(ValueError, match="needs a texture"):
+        FrequencySVBRDF(24).fit(texels, steps=1, progress=False)
+    texels.texture_shape = (5, 5)
+    with pytest.raises(ValueError, match=r"differs from 'data.texture_shape'"):
+        FrequencySVBRDF(24, texture_shape=(4, 6)).fit(texels, steps=1,
+                                                      progress=False)
+    texels.texel_index = torch.arange(24) % 20
+    with pytest.raises(ValueError, match='repeats texels'):
+        FrequencySVBRDF(24).fit(texels, steps=1, progress=False)
+    texels.texel_index = torch.arange(24) + 2
+    with pytest.raises(ValueError, match=r'outside \[0, 25\)'):
+        FrequencySVBRDF(24).fit(texels, steps=1, progress=False)
+    texels.texel_index = torch.arange(23)
+    with pytest.raises(ValueError, match=r"'data.texel_index' must have "
+                                         r"shape \[24\]"):
+        FrequencySVBRDF(24).fit(texels, steps=1, progress=False)

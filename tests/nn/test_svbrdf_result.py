@@ -189,3 +189,64 @@ def test_merge_by_entropy_rejects_bad_inputs():
     with pytest.raises(ValueError, match='texture_shape'):
         SVBRDFResult.merge_by_entropy([result(), result(
             texture_shape=(2, 3))])
+def texel_result(texel_index=(5, 0, 2, 3), texture_shape=(2, 3)):
+    """Points on some texels of a texture: a partial texture."""
+    res = result(n=len(texel_index), texture_shape=texture_shape)
+    res.texel_index = torch.tensor(texel_index)
+    return res
+
+
+def test_some_texels_are_scattered_into_textures(tmp_path):
+    res = texel_result()
+    maps = res.maps()
+    assert list(maps) == ['base_color', 'metallic', 'roughness', 'entropy',
+                          'coverage']
+    coverage = np.array([[True, False, True], [True, False, True]])
+    np.testing.assert_array_equal(maps['coverage'], coverage)
+    for name in ('base_color', 'metallic', 'roughness', 'entropy'):
+        value = getattr(res, name).numpy()
+        texture = maps[name]
+        assert texture.shape == (2, 3) + value.shape[1:]
+        flat = texture.reshape((6, ) + value.shape[1:])
+        np.testing.assert_array_equal(flat[[5, 0, 2, 3]], value)
+        assert np.isnan(flat[[1, 4]]).all()
+    paths = res.save(str(tmp_path / 'out'))
+    assert [os.path.basename(p) for p in paths] == [
+        'maps.npz', 'base_color.png', 'metallic.png', 'roughness.png',
+        'entropy.png', 'coverage.png']
+    stored = np.load(paths[0])
+    np.testing.assert_array_equal(stored['coverage'], coverage)
+    np.testing.assert_array_equal(stored['roughness'], maps['roughness'])
+    # uncovered texels are black, covered ones their (quantised) values
+    colour = read_png(paths[1])
+    assert (colour[~coverage] == 0).all()
+    np.testing.assert_allclose(colour[coverage],
+                               quantised(maps['base_color'][coverage]),
+                               atol=1e-6)
+    assert (read_png(paths[4])[~coverage] == 0).all()  # entropy
+    np.testing.assert_array_equal(read_png(paths[5])[..., 0], coverage)
+    # every texel, listed: the texture as without a texel_index
+    full = texel_result(tuple(range(6)))
+    np.testing.assert_array_equal(full.maps()['roughness'],
+                                  full.roughness.numpy().reshape(2, 3))
+    assert full.maps()['coverage'].all()
+
+
+def test_texel_index_bad_input():
+    for index, match in (((0, 1, 6), r'outside \[0, 6\)'),
+                         ((0, 1, 1), 'repeats texels'),
+                         ((-1, 0, 1), r'outside \[0, 6\)')):
+        with pytest.raises(ValueError, match=match):
+            texel_result(index).maps()
+    wrong = texel_result((0, 1, 2))
+    wrong.texel_index = torch.tensor([0, 1])
+    with pytest.raises(ValueError, match=r'one integer texel per point'):
+        wrong.maps()
+    wrong.texel_index = torch.tensor([0.0, 1.0, 2.0])
+    with pytest.raises(ValueError, match=r'one integer texel per point'):
+        wrong.maps()
+    lost = texel_result((0, 1, 2))
+    lost.texture_shape = None
+    with pytest.raises(ValueError, match="'texel_index' needs a "
+                                         "'texture_shape'"):
+        lost.maps()

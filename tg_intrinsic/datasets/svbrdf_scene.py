@@ -20,12 +20,13 @@ from tg_intrinsic.geometry.appearance.sh import fibonacci_sphere
 from tg_intrinsic.geometry.checks import (check_faces, check_image_size,
                                           check_points, check_positive_int)
 from tg_intrinsic.geometry.mesh import vertex_normals
+from tg_intrinsic.geometry.texture import uv_sphere
 from tg_intrinsic.io.hdr import read_envmap
 
 from .capture import render_images as _render_images
 
 
-SHAPES = ('sphere', )
+SHAPES = ('sphere', 'uv_sphere')
 MATERIALS = ('metals', 'dielectrics', 'mixed')
 
 
@@ -199,7 +200,11 @@ def svbrdf_scene(shape: Union[str, Tuple[Tensor, Tensor]] = 'sphere',
     ``obs_radiance`` is 0 where ``obs_mask`` is False.
 
     Args:
-        shape (str or tuple, optional): ``'sphere'`` (an icosphere), a
+        shape (str or tuple, optional): ``'sphere'`` (an icosphere),
+            ``'uv_sphere'`` (a UV-mapped latitude-longitude unit sphere,
+            :func:`~tg_intrinsic.geometry.texture.uv_sphere`, with its
+            exact normals; for
+            :class:`~tg_intrinsic.transforms.TextureTexels`), a
             mesh ``(vertices [n, 3], faces)`` (a torch ``[3, F]`` long
             tensor in PyG layout or a numpy ``[F, 3]`` array as trimesh
             gives), or the path of a mesh file read with trimesh
@@ -218,7 +223,9 @@ def svbrdf_scene(shape: Union[str, Tuple[Tensor, Tensor]] = 'sphere',
         seed (int, optional): Everything random (materials, sun, lattice
             shifts) follows from it. (default: :obj:`0`)
         resolution (int, optional): Icosphere subdivisions for
-            ``'sphere'`` (default 4: 2562 vertices); for a mesh, a target
+            ``'sphere'`` (default 4: 2562 vertices), latitude bands for
+            ``'uv_sphere'`` (twice as many longitude bands; default 16:
+            527 vertices); for a mesh, a target
             vertex count reached by edge-collapse decimation (closed
             manifold meshes only). (default: :obj:`None`)
         render_images (bool, optional): Also render ``images``.
@@ -251,7 +258,8 @@ def svbrdf_scene(shape: Union[str, Tuple[Tensor, Tensor]] = 'sphere',
         ``intrinsics`` :math:`(V, 3, 3)`, ``extrinsics`` :math:`(V, 3, 4)`,
         ``obs_radiance`` :math:`(N, V, 3)`, ``obs_dir`` :math:`(N, V, 3)`,
         ``obs_mask`` :math:`(N, V)` and, if :obj:`render_images`,
-        ``images`` :math:`(V, H, W, 3)` (background 0).
+        ``images`` :math:`(V, H, W, 3)` (background 0); ``uv``
+        :math:`(N, 2)` for ``'uv_sphere'``.
 
     Raises:
         ValueError: On bad arguments, and when a camera sees no vertex at
@@ -280,9 +288,17 @@ def svbrdf_scene(shape: Union[str, Tuple[Tensor, Tensor]] = 'sphere',
         raise ValueError(f"'dtype' must be torch.float32 or torch.float64, "
                          f"got {dtype}")
 
-    pos, face = _load_shape(shape, resolution, seed)
-    pos = _normalise(pos)
-    normal = vertex_normals(pos, face)
+    uv = None
+    if isinstance(shape, str) and shape == 'uv_sphere':
+        # the unit sphere already; its exact normals, not the faceted ones
+        rows = 16 if resolution is None else check_positive_int(
+            resolution, 'resolution', 2)
+        pos, face, uv = uv_sphere(rows, 2 * rows)
+        normal = pos.clone()
+    else:
+        pos, face = _load_shape(shape, resolution, seed)
+        pos = _normalise(pos)
+        normal = vertex_normals(pos, face)
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0]))
     base_color, metallic, roughness = _materials(
         pos, materials, (lo, hi), num_patches, rng)
@@ -327,6 +343,8 @@ def svbrdf_scene(shape: Union[str, Tuple[Tensor, Tensor]] = 'sphere',
                 extrinsics=extrinsics.to(dtype),
                 obs_radiance=obs_radiance.to(dtype),
                 obs_dir=obs_dir.to(dtype), obs_mask=obs_mask)
+    if uv is not None:
+        data.uv = uv.to(dtype)
     if render_images:
         data.images = _render_images(
             pos, face, normal, base_color, metallic, roughness, intrinsics,

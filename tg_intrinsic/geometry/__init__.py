@@ -11,8 +11,9 @@ split by domain:
 - :mod:`~tg_intrinsic.geometry.appearance`: spherical harmonics, BRDF terms,
   environment maps, cameras, the lighting integral, rasterisation;
 
-with the triangle-mesh basics every domain uses (:mod:`.mesh`), sparse
-conversions (:mod:`.sparse`) and the input checks of the whole library
+with the triangle-mesh basics every domain uses (:mod:`.mesh`), the
+texture space of UV-mapped meshes (:mod:`.texture`), sparse conversions
+(:mod:`.sparse`) and the input checks of the whole library
 (:mod:`.checks`).
 
 Edge convention (PyG's ``source_to_target`` flow): ``edge_index[0]`` is the
@@ -34,6 +35,7 @@ from .mesh import (face_areas, face_normals, vertex_normals, lumped_mass,
                    remove_unreferenced_vertices, normalize_area,
                    laplacian_spectrum, weld_vertices)
 from .sparse import to_scipy, from_scipy
+from .texture import rasterize_uv, texture_grid_edges, uv_sphere
 from .geodesics import geodesic_neighbourhoods, log_map, vertex_area_weights
 
 __all__ = [
@@ -57,6 +59,9 @@ __all__ = [
     'weld_vertices',
     'to_scipy',
     'from_scipy',
+    'rasterize_uv',
+    'texture_grid_edges',
+    'uv_sphere',
     'mls_grad_div',
     'build_mls_operators',
     'SurfaceOperators',

@@ -14,9 +14,10 @@ from tg_intrinsic.geometry.appearance.brdf import (
 from tg_intrinsic.geometry.appearance.sh import (fit_light,
                                                  light_directions, real_sh,
                                                  smith_g1)
-from tg_intrinsic.geometry.checks import (check_choice,
-                                           check_positive_float,
+from tg_intrinsic.geometry.checks import (check_choice, check_image_size,
+                                           check_index, check_positive_float,
                                            check_positive_int)
+from tg_intrinsic.geometry.texture import texture_grid_edges
 from tg_intrinsic.nn.svbrdf_result import SVBRDFResult
 from tg_intrinsic.solvers.levenberg_marquardt import levenberg_marquardt
 
@@ -55,9 +56,13 @@ class FrequencySVBRDF(torch.nn.Module):
 
     Args:
         num_points (int): Points (or texels) :math:`N`.
-        texture_shape (tuple, optional): ``(H, W)`` when the points are the
-            texels of a texture (exports then write texture images).
-            (default: :obj:`None`)
+        texture_shape (tuple, optional): ``(H, W)`` when the points are
+            texels of a texture: all :math:`HW` of them, row by row, or
+            those of ``data.texel_index`` (see
+            :class:`~tg_intrinsic.transforms.TextureTexels`, which also
+            sets ``data.texture_shape``, enough on its own). The total
+            variation then runs along the texture grid and exports write
+            texture images. (default: :obj:`None`)
         fresnel (bool, optional): Schlick's Fresnel on the specular term.
             (default: :obj:`True`)
         masking (bool, optional): :math:`G_\alpha(\theta_o)`.
@@ -84,12 +89,11 @@ class FrequencySVBRDF(torch.nn.Module):
         super().__init__()
         self.num_points = check_positive_int(num_points, 'num_points')
         if texture_shape is not None:
-            texture_shape = tuple(int(s) for s in texture_shape)
-            if len(texture_shape) != 2 or math.prod(texture_shape) \
-                    != num_points:
+            texture_shape = check_image_size(texture_shape, 'texture_shape')
+            if math.prod(texture_shape) < num_points:
                 raise ValueError(f"'texture_shape' must be (H, W) with H * W "
-                                 f"= num_points = {num_points}, got "
-                                 f"{texture_shape}")
+                                 f">= num_points = {num_points} (the points "
+                                 f"are texels), got {texture_shape}")
         self.texture_shape = texture_shape
         self.fresnel, self.masking, self.shadowing = fresnel, masking, \
             shadowing
@@ -206,8 +210,11 @@ class FrequencySVBRDF(torch.nn.Module):
             shadowing_every (int, optional): Adam steps between shadowing
                 refits. (default: :obj:`50`)
             tv_weight (float, optional): Weight of the total variation
-                :math:`\frac{1}{|E|}\sum_{(i,j)} |x_i - x_j|` over mesh edges
-                (or a :obj:`tv_k`-nearest-neighbour graph); with
+                :math:`\frac{1}{|E|}\sum_{(i,j)} |x_i - x_j|` over the
+                4-neighbour grid of the texels for texture points
+                (:func:`~tg_intrinsic.geometry.texture.texture_grid_edges`),
+                else mesh edges (or a :obj:`tv_k`-nearest-neighbour graph);
+                with
                 :obj:`'lm'`, every round pulls each point towards its
                 neighbours' values of the previous round. (default:
                 :obj:`0.0`)
@@ -244,6 +251,7 @@ class FrequencySVBRDF(torch.nn.Module):
             raise ValueError(f"'metallic' must be None (fitted) or a number "
                              f"in [0, 1], got {metallic!r}")
         self._check(data)
+        texture_shape, texel_index = self._texels(data)
         observed = data.obs_radiance[data.obs_mask.bool()]
         if not bool(torch.isfinite(observed).all()):
             raise ValueError("'data.obs_radiance' holds NaN or infinite "
@@ -280,7 +288,7 @@ class FrequencySVBRDF(torch.nn.Module):
             roughness=self.roughness.detach().clone(),
             entropy=getattr(data, 'entropy', None),
             loss=history + [final], seconds=time.perf_counter() - start,
-            texture_shape=self.texture_shape)
+            texture_shape=texture_shape, texel_index=texel_index)
 
     def _fit_adam(self, problem, steps, lr, shadowing_every, metallic,
                   progress):
@@ -359,12 +367,53 @@ class FrequencySVBRDF(torch.nn.Module):
         tv = tv + (self.roughness[i] - self.roughness[j]).abs()
         return tv.mean()
 
-    @staticmethod
-    def _graph(data: Data, k: int) -> Tensor:
+    def _graph(self, data: Data, k: int) -> Tensor:
+        """The total variation's graph: the texture grid among texels,
+        else the mesh edges, else a kNN graph."""
+        texture_shape, texel_index = self._texels(data)
+        if texture_shape is not None:
+            if texel_index is None:  # every texel, row by row
+                texel_index = torch.arange(self.num_points,
+                                           device=data.sh_in.device)
+            return texture_grid_edges(texel_index, texture_shape)
         face = getattr(data, 'face', None)
         if face is not None:
             return mesh_edges(face, data.pos.size(0))
         return knn(data.pos, k)
+
+    def _texels(self, data: Data):
+        """``(texture_shape, texel_index)`` when the points are texels (the
+        model's or the data's texture; the index is None when the points
+        are all texels in order), else ``(None, None)``."""
+        shape = self.texture_shape
+        given = getattr(data, 'texture_shape', None)
+        if given is not None:
+            given = check_image_size(tuple(int(s) for s in given),
+                                     'data.texture_shape')
+            if shape is not None and shape != given:
+                raise ValueError(f"the model's texture_shape {shape} differs "
+                                 f"from 'data.texture_shape' {given}")
+            shape = given
+        index = getattr(data, 'texel_index', None)
+        if shape is None:
+            if index is not None:
+                raise ValueError("'data.texel_index' needs a texture: set "
+                                 "'data.texture_shape' or the model's "
+                                 "texture_shape")
+            return None, None
+        if index is None:
+            if math.prod(shape) != self.num_points:
+                raise ValueError(f"{self.num_points} points are not all "
+                                 f"texels of a {shape} texture; give "
+                                 f"'data.texel_index' (see TextureTexels)")
+            return shape, None
+        index = check_index(index, 'data.texel_index', math.prod(shape),
+                            data.sh_in, size=self.num_points,
+                            what='texels (H * W)', ref_name='data.sh_in')
+        if torch.unique(index).numel() != index.numel():
+            raise ValueError("'data.texel_index' repeats texels; every point "
+                             "must be a different texel")
+        return shape, index
 
     def _check(self, data: Data):
         for key in _NEEDED:
@@ -403,7 +452,7 @@ class _Problem:
             else 1.0
         self.l_max = int(round(math.sqrt(data.sh_in.size(1)))) - 1
         self.tv_weight = tv_weight
-        self.edges = FrequencySVBRDF._graph(data, tv_k) if tv_weight > 0 \
+        self.edges = model._graph(data, tv_k) if tv_weight > 0 \
             else None
         self.neighbours = None if self.edges is None \
             else _neighbour_table(self.edges, data.sh_in.size(0))

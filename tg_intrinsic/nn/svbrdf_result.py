@@ -37,6 +37,10 @@ class SVBRDFResult:
         loss (list): Loss per step (the last entry after the final step).
         seconds (float): Wall time of the fit.
         texture_shape (tuple): ``(H, W)`` when the points are texels.
+        texel_index (torch.Tensor): :math:`(N)` flat row-major texel of
+            every point when they are some of the texels (see
+            :class:`~tg_intrinsic.transforms.TextureTexels`); :obj:`None`
+            when they are all :math:`HW` texels, row by row.
     """
     base_color: Tensor
     metallic: Tensor
@@ -45,18 +49,37 @@ class SVBRDFResult:
     loss: List[float] = field(default_factory=list)
     seconds: float = 0.0
     texture_shape: Optional[Tuple[int, int]] = None
+    texel_index: Optional[Tensor] = None
 
     def maps(self) -> dict:
-        """The maps as numpy arrays (reshaped to textures if texels)."""
+        """The maps as numpy arrays; texel maps as :math:`(H, W[, 3])`
+        textures. With a :obj:`texel_index`, the texels without a point
+        are NaN and a boolean :math:`(H, W)` ``coverage`` map (True where a
+        point is) comes last."""
         out = {'base_color': self.base_color, 'metallic': self.metallic,
                'roughness': self.roughness}
         if self.entropy is not None:
             out['entropy'] = self.entropy
         out = {k: v.detach().cpu().numpy() for k, v in out.items()}
-        if self.texture_shape is not None:
-            out = {k: v.reshape(self.texture_shape + v.shape[1:])
-                   for k, v in out.items()}
-        return out
+        if self.texture_shape is None:
+            if self.texel_index is not None:
+                raise ValueError("'texel_index' needs a 'texture_shape'")
+            return out
+        shape = tuple(self.texture_shape)
+        if self.texel_index is None:
+            return {k: v.reshape(shape + v.shape[1:]) for k, v in out.items()}
+        index = _texel_positions(self.texel_index, shape, len(
+            self.roughness))
+        textures = {}
+        for k, v in out.items():
+            texture = np.full((math.prod(shape), ) + v.shape[1:], np.nan,
+                              dtype=v.dtype)
+            texture[index] = v
+            textures[k] = texture.reshape(shape + v.shape[1:])
+        coverage = np.zeros(math.prod(shape), dtype=bool)
+        coverage[index] = True
+        textures['coverage'] = coverage.reshape(shape)
+        return textures
 
     def save_npz(self, path: str) -> str:
         """Writes :meth:`maps` as ``.npz`` atomically; returns ``path``."""
@@ -71,7 +94,9 @@ class SVBRDFResult:
         each file atomically: the base colour as RGB, metallic and
         roughness as grey values (so texel maps are usable textures), the
         entropy through the colormap of :data:`MAP_INFO` (turbo). Texel
-        maps are written as textures. Point maps are drawn as seen by one
+        maps are written as textures; with a :obj:`texel_index` the
+        texels without a point are black (NaN in ``maps.npz``) and
+        ``coverage.png`` is white where a point is. Point maps are drawn as seen by one
         camera (the first of :obj:`intrinsics` / :obj:`extrinsics`, else
         one above the object looking down :math:`-z`): on the surface
         when :obj:`face` is given (rasterised,
@@ -111,6 +136,8 @@ class SVBRDFResult:
                 value[~hit] = np.nan
                 if maps[name].ndim == 1:
                     value = value[..., 0]
+            if value.dtype == bool:  # the coverage mask
+                value = value.astype(np.float64)
             if name == 'entropy':
                 colormap = matplotlib.colormaps[MAP_INFO[name]['cmap']]
                 image = colormap(np.nan_to_num(value, nan=0.0))[..., :3]
@@ -204,6 +231,23 @@ class SVBRDFResult:
                      seconds=sum(r.seconds for r in results),
                      texture_shape=results[0].texture_shape)
         return merged, source
+
+
+def _texel_positions(texel_index, texture_shape, num_points) -> np.ndarray:
+    """``texel_index`` as numpy, checked against the texture and the
+    points: one distinct texel per point."""
+    index = np.asarray(torch.as_tensor(texel_index).detach().cpu())
+    size = math.prod(texture_shape)
+    if index.shape != (num_points, ) or index.dtype.kind not in 'iu':
+        raise ValueError(f"'texel_index' must hold one integer texel per "
+                         f"point ({num_points}), got {index.dtype} of shape "
+                         f"{list(index.shape)}")
+    if index.size and (index.min() < 0 or index.max() >= size):
+        raise ValueError(f"'texel_index' holds texels outside [0, {size}) "
+                         f"of the {tuple(texture_shape)} texture")
+    if len(np.unique(index)) != len(index):
+        raise ValueError("'texel_index' repeats texels")
+    return index
 
 
 def _write_png(f, image):

@@ -19,11 +19,12 @@ from .select_views import SelectViews, keep_views
 from .clean_mesh import CleanMesh
 from .decimate import Decimate
 from .farthest_point_resample import FarthestPointResample
+from .texture_texels import TextureTexels
 
 __all__ = ['EstimateNormals', 'TangentFrames', 'MLSOperators',
            'RandomRotation', 'RandomAxisScale', 'RandomTranslation',
            'NormalizeArea', 'LogMap', 'ParallelTransport',
            'MultiscaleSupports', 'HarmonicPrecompute', 'GravoHierarchy', 'ProjectViews',
            'FitSphericalHarmonics', 'SpectralUncertainty', 'SelectViews',
-           'keep_views', 'CleanMesh',
-           'Decimate', 'FarthestPointResample']
+           'keep_views', 'CleanMesh', 'Decimate', 'FarthestPointResample',
+           'TextureTexels']

@@ -8,6 +8,8 @@ from torch.nn import Parameter
 from torch_geometric.data import Data
 
 from tg_intrinsic.geometry import knn, mesh_edges
+from tg_intrinsic.geometry.appearance.direct_lighting import (
+    direction_visibility, reflection_tables)
 from tg_intrinsic.geometry.appearance.brdf import (
     MIN_ALPHA, dominant_direction, lobe_degree_sums, model_alpha,
     principled_reflectance, principled_reflectance_jacobian, sh_reflectance)
@@ -19,7 +21,8 @@ from tg_intrinsic.geometry.checks import (check_choice, check_image_size,
                                            check_positive_int)
 from tg_intrinsic.geometry.texture import texture_grid_edges
 from tg_intrinsic.nn.svbrdf_result import SVBRDFResult
-from tg_intrinsic.solvers.levenberg_marquardt import levenberg_marquardt
+from tg_intrinsic.solvers.levenberg_marquardt import (
+    levenberg_marquardt, levenberg_marquardt_tv)
 
 SOLVERS = ('adam', 'lm')
 #: Adam steps, or Levenberg-Marquardt iterations per round, by default.
@@ -29,6 +32,10 @@ DEFAULT_STEPS = {'adam': 200, 'lm': 20}
 # (and vice versa) that unbounded first steps jump into; measured on the
 # model's own observations, 0.05 recovers every point, 0.1 loses 3%.
 MAX_STEP = 0.05
+#: Parameter difference below which the Levenberg-Marquardt solver treats
+#: the total variation as quadratic (Huber): the L1 weights of smaller
+#: differences would otherwise glue neighbours together.
+TV_EPSILON = 0.02
 _NEEDED = ('sh_in', 'light_radiance', 'mirror_dir', 'irradiance',
            'obs_radiance', 'obs_mask', 'sh_prefilter')
 
@@ -187,7 +194,8 @@ class FrequencySVBRDF(torch.nn.Module):
         - :obj:`'lm'`: every point on its own (the objective is separable,
           5 unknowns per point), by batched projected Levenberg-Marquardt
           (:func:`~tg_intrinsic.solvers.levenberg_marquardt`) with
-          iteratively reweighted least squares for the L1 distance. The
+          iteratively reweighted least squares for the L1 distance; with a
+          total variation, all points together. The
           shadowing of the light (or the split sum's lobe directions)
           follows the roughness between :obj:`rounds` solves. It reaches
           a lower objective than Adam in less time, but on captures
@@ -214,10 +222,10 @@ class FrequencySVBRDF(torch.nn.Module):
                 4-neighbour grid of the texels for texture points
                 (:func:`~tg_intrinsic.geometry.texture.texture_grid_edges`),
                 else mesh edges (or a :obj:`tv_k`-nearest-neighbour graph);
-                with
-                :obj:`'lm'`, every round pulls each point towards its
-                neighbours' values of the previous round. (default:
-                :obj:`0.0`)
+                with :obj:`'lm'` it couples the points, which are then
+                solved together
+                (:func:`~tg_intrinsic.solvers.levenberg_marquardt_tv`).
+                (default: :obj:`0.0`)
             tv_k (int, optional): Neighbours of that graph for point
                 clouds. (default: :obj:`8`)
             metallic (float, optional): Holds the metallic map at this
@@ -246,18 +254,10 @@ class FrequencySVBRDF(torch.nn.Module):
         tv_weight = check_positive_float(tv_weight, 'tv_weight',
                                          allow_zero=True)
         check_choice(init, 'init', ('spectrum', 'constant'))
-        if metallic is not None and not (isinstance(metallic, (int, float))
-                                         and 0 <= metallic <= 1):
-            raise ValueError(f"'metallic' must be None (fitted) or a number "
-                             f"in [0, 1], got {metallic!r}")
+        self._check_metallic(metallic)
         self._check(data)
-        texture_shape, texel_index = self._texels(data)
-        observed = data.obs_radiance[data.obs_mask.bool()]
-        if not bool(torch.isfinite(observed).all()):
-            raise ValueError("'data.obs_radiance' holds NaN or infinite "
-                             "radiance at observed entries; mask them out "
-                             "in 'obs_mask' (ProjectViews does so for NaN "
-                             "pixels)")
+        self._texels(data)  # validated before the work
+        self._check_observations(data)
         start = time.perf_counter()
         if getattr(data, 'init_roughness', None) is None \
                 or getattr(data, 'entropy', None) is None:
@@ -279,14 +279,124 @@ class FrequencySVBRDF(torch.nn.Module):
         else:
             history = self._fit_adam(problem, steps, lr, shadowing_every,
                                      metallic, progress)
+        return self._result(problem, history, start)
+
+    def refine(self, data: Data, envmap: Optional[Tensor] = None,
+               steps: int = 10, rounds: int = 2, tv_weight: float = 0.0,
+               tv_k: int = 8, metallic: Optional[float] = None,
+               visibility: str = 'auto', roughness_cells: int = 25,
+               light_samples: int = 64, brdf_samples: int = 32,
+               seed: int = 0, progress: bool = True) -> SVBRDFResult:
+        r"""Refines the current parameters (usually those of :meth:`fit`)
+        against the observations with the full reflection integral of
+        direct environment lighting instead of the spherical-harmonic
+        model, the chapter's "initialisation" application:
+
+        .. math::
+            B(\mathbf{p}, \omega_o) = \frac{K_d}{\pi} E(\mathbf{p})
+            + R_0\, A(\mathbf{p}, \omega_o; r)
+            + C(\mathbf{p}, \omega_o; r),
+
+        with the shadowed irradiance :math:`E` and the specular integrals
+        :math:`A, C` of GGX + Smith + Schlick over the whole environment
+        map, tabulated once over :obj:`roughness_cells` roughness values
+        for every observed pair
+        (:func:`~tg_intrinsic.geometry.appearance.direct_lighting.reflection_tables`;
+        torch, CPU or GPU), and visibility from the geometry. The same
+        cosine-weighted L1 distance as :meth:`fit` is minimised by the
+        batched Levenberg-Marquardt solver.
+
+        Args:
+            data (Data): As for :meth:`fit`, with ``normal`` and
+                ``obs_dir``.
+            envmap (torch.Tensor, optional): The light :math:`(H, W, 3)`
+                (default ``data.envmap``). (default: :obj:`None`)
+            steps (int, optional): Iterations per round. (default: :obj:`10`)
+            rounds (int, optional): Solves, each from the last.
+                (default: :obj:`2`)
+            tv_weight (float, optional): As for :meth:`fit`.
+                (default: :obj:`0.0`)
+            tv_k (int, optional): As for :meth:`fit`. (default: :obj:`8`)
+            metallic (float, optional): As for :meth:`fit`.
+                (default: :obj:`None`)
+            visibility (str, optional): :obj:`'geometry'` (rays against the
+                mesh ``face``; needs it), :obj:`'horizon'` (every direction
+                above the tangent plane: convex objects) or :obj:`'auto'`
+                (geometry when the data has faces). (default: :obj:`'auto'`)
+            roughness_cells (int, optional): Roughness values of the tables,
+                evenly spaced from :math:`\sqrt{\alpha_{min}}` to 1.
+                (default: :obj:`25`)
+            light_samples (int, optional): Environment samples per point.
+                (default: :obj:`64`)
+            brdf_samples (int, optional): GGX samples per pair and
+                roughness. (default: :obj:`32`)
+            seed (int, optional): Seed of the integration samples.
+                (default: :obj:`0`)
+            progress (bool, optional): Show a progress bar.
+                (default: :obj:`True`)
+
+        Returns:
+            :class:`~tg_intrinsic.nn.svbrdf_result.SVBRDFResult`, its
+            ``seconds`` including the tables.
+        """
+        steps = check_positive_int(steps, 'steps', minimum=0)
+        rounds = check_positive_int(rounds, 'rounds')
+        tv_weight = check_positive_float(tv_weight, 'tv_weight',
+                                         allow_zero=True)
+        roughness_cells = check_positive_int(roughness_cells,
+                                             'roughness_cells', minimum=2)
+        visibility = check_choice(visibility, 'visibility',
+                                  ('auto', 'geometry', 'horizon'))
+        self._check_metallic(metallic)
+        self._check(data)
+        self._texels(data)
+        for key in ('normal', 'obs_dir'):
+            if getattr(data, key, None) is None:
+                raise ValueError(f"'data.{key}' is missing; prepare the data "
+                                 f"with ProjectViews")
+        if envmap is None:
+            envmap = getattr(data, 'envmap', None)
+            if envmap is None:
+                raise ValueError("refine needs the light: pass 'envmap' or "
+                                 "set 'data.envmap' [H, W, 3]")
+        self._check_observations(data)
+        start = time.perf_counter()
+        if metallic is not None:
+            with torch.no_grad():
+                self.metallic.fill_(metallic)
+        face = getattr(data, 'face', None)
+        if visibility == 'geometry' and face is None:
+            raise ValueError("visibility='geometry' needs the mesh in "
+                             "'data.face'; use 'horizon' for point clouds")
+        dtype = data.sh_in.dtype
+        visible = None
+        if face is not None and visibility != 'horizon':
+            visible = direction_visibility(data.pos, data.normal, data.pos,
+                                           face)
+        grid = torch.linspace(math.sqrt(MIN_ALPHA), 1.0, roughness_cells,
+                              dtype=dtype, device=data.sh_in.device)
+        # single precision: the tables are Monte Carlo estimates (about 1%
+        # noise), and float32 halves their cost
+        single = torch.float32
+        irradiance, tables = reflection_tables(
+            data.normal.to(single), data.obs_dir.to(single),
+            data.obs_mask.bool(), envmap.to(single), grid.to(single),
+            visible, light_samples, brdf_samples, seed)
+        problem = _IntegralProblem(self, data, tv_weight, tv_k, grid,
+                                   irradiance.to(dtype), tables.to(dtype))
+        history = self._fit_lm(problem, steps, rounds, metallic, progress)
+        return self._result(problem, history, start)
+
+    def _result(self, problem, history, start) -> SVBRDFResult:
         with torch.no_grad():
             final = float(problem.loss(self.base_color, self.metallic,
                                        self.roughness))
+        texture_shape, texel_index = self._texels(problem.data)
         return SVBRDFResult(
             base_color=self.base_color.detach().clone(),
             metallic=self.metallic.detach().clone(),
             roughness=self.roughness.detach().clone(),
-            entropy=getattr(data, 'entropy', None),
+            entropy=getattr(problem.data, 'entropy', None),
             loss=history + [final], seconds=time.perf_counter() - start,
             texture_shape=texture_shape, texel_index=texel_index)
 
@@ -332,13 +442,20 @@ class FrequencySVBRDF(torch.nn.Module):
                                    self.metallic.unsqueeze(-1),
                                    self.roughness.unsqueeze(-1)], 1)
             x0 = every[:, columns].to(problem.dtype)
-            residual, jacobian = problem.residual(x0, columns)
-            x, _ = levenberg_marquardt(
-                residual, x0, problem.point_weight(len(columns)),
-                lower.to(x0), torch.ones_like(lower).to(x0), loss='l1',
-                max_iter=steps, tol=1e-4,
-                l1_epsilon=1e-3 * problem.radiance_scale, jacobian=jacobian,
-                max_step=MAX_STEP)
+            residual, jacobian = problem.residual(columns)
+            bounds = lower.to(x0), torch.ones_like(lower).to(x0)
+            options = dict(max_iter=steps, tol=1e-4, max_step=MAX_STEP,
+                           l1_epsilon=1e-3 * problem.radiance_scale)
+            if problem.edges is None:  # every point on its own
+                x, _ = levenberg_marquardt(
+                    residual, x0, problem.weight_rows, *bounds, loss='l1',
+                    jacobian=jacobian, **options)
+            else:  # coupled by the total variation
+                rows = torch.arange(x0.size(0), device=x0.device)
+                x, _ = levenberg_marquardt_tv(
+                    lambda x: jacobian(x, rows), x0, problem.weight_rows,
+                    problem.edges, problem.tv_weight / problem.edges.size(1),
+                    *bounds, tv_epsilon=TV_EPSILON, **options)
             with torch.no_grad():
                 every[:, columns] = x.to(every)
                 self.base_color.copy_(every[:, :3])
@@ -415,6 +532,26 @@ class FrequencySVBRDF(torch.nn.Module):
                              "must be a different texel")
         return shape, index
 
+    @staticmethod
+    def _check_metallic(metallic):
+        if metallic is not None and not (isinstance(metallic, (int, float))
+                                         and 0 <= metallic <= 1):
+            raise ValueError(f"'metallic' must be None (fitted) or a number "
+                             f"in [0, 1], got {metallic!r}")
+
+    @staticmethod
+    def _check_observations(data: Data):
+        observed = data.obs_radiance[data.obs_mask.bool()]
+        if observed.numel() == 0:
+            raise ValueError("no point is observed by any view "
+                             "('data.obs_mask' is all False): check the "
+                             "cameras, they must look at the object")
+        if not bool(torch.isfinite(observed).all()):
+            raise ValueError("'data.obs_radiance' holds NaN or infinite "
+                             "radiance at observed entries; mask them out "
+                             "in 'obs_mask' (ProjectViews does so for NaN "
+                             "pixels)")
+
     def _check(self, data: Data):
         for key in _NEEDED:
             if getattr(data, key, None) is None:
@@ -454,8 +591,9 @@ class _Problem:
         self.tv_weight = tv_weight
         self.edges = model._graph(data, tv_k) if tv_weight > 0 \
             else None
-        self.neighbours = None if self.edges is None \
-            else _neighbour_table(self.edges, data.sh_in.size(0))
+        # the residuals' weights, one row per point, as the solvers take them
+        self.weight_rows = (self.weight.expand_as(self.target) / self.normaliser
+                            ).reshape(self.target.size(0), -1)
         self.sums = None
 
     def refresh(self):
@@ -493,26 +631,10 @@ class _Problem:
             loss = loss + self.tv_weight * model.total_variation(self.edges)
         return loss
 
-    def point_weight(self, num_params: int) -> Tensor:
-        """Weights of the residuals of :meth:`residual`, per point: the
-        observations', then the total variation's (each edge pulls on both
-        of its points, so twice the weight of one term of the mean)."""
-        w = self.weight.expand_as(self.target).reshape(self.target.size(0),
-                                                       -1)
-        w = w / self.normaliser
-        if self.neighbours is None:
-            return w
-        tv = (self.neighbours >= 0).to(w) * (
-            2 * self.tv_weight / self.edges.size(1))
-        tv = tv.repeat_interleave(num_params, 1)
-        return torch.cat([w, tv], 1)
-
-    def residual(self, current: Tensor, columns):
+    def residual(self, columns):
         """The residuals of the points ``rows`` at parameters ``x``, the
         ``columns`` of (base colour, metallic, roughness) that are fitted,
-        and a function that also returns their Jacobian. ``current`` holds
-        every point's values of the previous round, which the total
-        variation pulls towards (block Jacobi)."""
+        and a function that also returns their Jacobian."""
         metallic = self.model.metallic.detach().to(self.dtype)
         fixed_metallic = 3 not in columns
 
@@ -520,44 +642,60 @@ class _Problem:
             m = metallic[rows] if fixed_metallic else x[:, 3]
             return x[:, :3], m, x[:, -1], rows
 
-        def variation(x, rows):
-            table = self.neighbours[rows]
-            other = current[table.clamp_min(0)]
-            diff = torch.where((table >= 0).unsqueeze(-1),
-                               x.unsqueeze(1) - other, 0 * other)
-            return diff.reshape(rows.numel(), -1)
-
         def residual(x, rows):
             pred = self.predict(*arguments(x, rows))
-            out = (pred - self.target[rows]).reshape(rows.numel(), -1)
-            if self.neighbours is None:
-                return out
-            return torch.cat([out, variation(x, rows)], 1)
+            return (pred - self.target[rows]).reshape(rows.numel(), -1)
 
         def jacobian(x, rows):
             pred, jac = self.predict(*arguments(x, rows), jacobian=True)
-            n, p = rows.numel(), len(columns)
-            out = (pred - self.target[rows]).reshape(n, -1)
-            jac = jac[..., columns].reshape(n, -1, p)
-            if self.neighbours is None:
-                return out, jac
-            eye = torch.eye(p, dtype=jac.dtype, device=jac.device)
-            tv_jac = eye.repeat(self.neighbours.size(1), 1).expand(n, -1, -1)
-            return (torch.cat([out, variation(x, rows)], 1),
-                    torch.cat([jac, tv_jac], 1))
+            n = rows.numel()
+            return ((pred - self.target[rows]).reshape(n, -1),
+                    jac[..., columns].reshape(n, -1, len(columns)))
         return residual, jacobian
 
 
-def _neighbour_table(edges: Tensor, num: int) -> Tensor:
-    """The neighbours ``edges[0]`` of every centre ``edges[1]`` as rows of
-    a ``[N, D]`` table padded with -1."""
-    nbr, centre = edges
-    order = torch.argsort(centre, stable=True)
-    nbr, centre = nbr[order], centre[order]
-    counts = torch.bincount(centre, minlength=num)
-    start = torch.cumsum(counts, 0) - counts
-    slot = torch.arange(centre.numel(), device=centre.device) - start[centre]
-    table = torch.full((num, max(int(counts.max()), 1)), -1,
-                       dtype=torch.long, device=centre.device)
-    table[centre, slot] = nbr
-    return table
+class _IntegralProblem(_Problem):
+    """The fitting problem of :meth:`FrequencySVBRDF.refine`: the full
+    integral, tabulated over a roughness grid and interpolated linearly
+    (the tables do not change with the parameters: nothing to refresh)."""
+    def __init__(self, model, data, tv_weight, tv_k, grid: Tensor,
+                 irradiance: Tensor, tables: Tensor):
+        super().__init__(model, data, tv_weight, tv_k)
+        self.grid, self.tables = grid, tables
+        self.diffuse = irradiance / math.pi
+
+    def refresh(self):
+        pass
+
+    def predict(self, base_color, metallic, roughness, rows=None,
+                jacobian: bool = False):
+        rows = torch.arange(self.tables.size(0), device=self.tables.device
+                            ) if rows is None else rows
+        dtype = self.dtype
+        b, m = base_color.to(dtype), metallic.to(dtype).unsqueeze(-1)
+        spacing = float(self.grid[1] - self.grid[0])
+        t = ((roughness.to(dtype) - self.grid[0]) / spacing).clamp(
+            0, self.grid.numel() - 1)
+        cell = t.detach().floor().long().clamp(max=self.grid.numel() - 2)
+        frac = (t - cell).view(-1, 1, 1)
+        lower = self.tables[rows, :, cell]            # [n, V, 2, 3]
+        upper = self.tables[rows, :, cell + 1]
+        table = lower + (upper - lower) * frac.unsqueeze(-1)
+        specular, constant = table[:, :, 0], table[:, :, 1]
+        diffuse = self.diffuse[rows].unsqueeze(1)      # [n, 1, 3]
+        r0 = 0.04 * (1 - m) + b * m
+        pred = ((b * (1 - m)).unsqueeze(1) * diffuse
+                + r0.unsqueeze(1) * specular + constant)
+        if not jacobian:
+            return pred
+        inside = ((roughness > self.grid[0]) & (roughness < self.grid[-1])
+                  ).to(dtype).view(-1, 1, 1)
+        slope = (upper - lower) / spacing * inside.unsqueeze(-1)
+        d_base = ((1 - m).unsqueeze(1) * diffuse + m.unsqueeze(1) * specular)
+        d_metallic = -b.unsqueeze(1) * diffuse + (b - 0.04).unsqueeze(
+            1) * specular
+        d_rough = r0.unsqueeze(1) * slope[:, :, 0] + slope[:, :, 1]
+        eye = torch.eye(3, dtype=dtype, device=pred.device)
+        jac = torch.cat([d_base.unsqueeze(-1) * eye, d_metallic.unsqueeze(-1),
+                         d_rough.unsqueeze(-1)], -1)   # [n, V, 3, 5]
+        return pred, jac

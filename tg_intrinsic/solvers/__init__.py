@@ -1,8 +1,10 @@
 """Solvers for linear systems on surfaces, and batched Levenberg-Marquardt
 for many small independent fits."""
 from .gravo_mg import ConvergenceWarning, GravoMG, SolveInfo
-from .levenberg_marquardt import LMInfo, levenberg_marquardt
+from .levenberg_marquardt import (LMInfo, levenberg_marquardt,
+                                  levenberg_marquardt_tv)
 from .systems import poisson, smooth, stiffness_and_mass
 
 __all__ = ['GravoMG', 'SolveInfo', 'ConvergenceWarning', 'smooth',
-           'poisson', 'stiffness_and_mass', 'levenberg_marquardt', 'LMInfo']
+           'poisson', 'stiffness_and_mass', 'levenberg_marquardt',
+           'levenberg_marquardt_tv', 'LMInfo']

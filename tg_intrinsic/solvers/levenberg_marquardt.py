@@ -2,8 +2,9 @@ r"""Batched Levenberg-Marquardt for many small independent problems, such
 as one SVBRDF per surface point: every row of the parameters has its own
 residuals, damping and acceptance, and all rows are solved at once as
 ``[N, P, P]`` systems."""
+import math
 from dataclasses import dataclass, field
-from typing import Callable, List, Optional
+from typing import Callable, List, Optional, Union
 
 import torch
 import torch.autograd.forward_ad as forward_ad
@@ -33,7 +34,8 @@ def levenberg_marquardt(residual: Callable[[Tensor], Tensor], x0: Tensor,
                         lower: Optional[Tensor] = None,
                         upper: Optional[Tensor] = None, loss: str = 'l2',
                         max_iter: int = 30, tol: float = 1e-6,
-                        damping: float = 1e-3, l1_epsilon: float = 1e-3,
+                        damping: float = 1e-3,
+                        l1_epsilon: Union[float, Tensor] = 1e-3,
                         jacobian: Optional[Callable] = None,
                         max_step: Optional[float] = None) -> tuple:
     r"""Minimises, for every row :math:`n` independently,
@@ -80,8 +82,11 @@ def levenberg_marquardt(residual: Callable[[Tensor], Tensor], x0: Tensor,
             (default: :obj:`1e-6`)
         damping (float, optional): Initial :math:`\lambda`.
             (default: :obj:`1e-3`)
-        l1_epsilon (float, optional): :math:`\epsilon` of the L1 weights,
-            in the units of the residuals. (default: :obj:`1e-3`)
+        l1_epsilon (float or torch.Tensor, optional): :math:`\epsilon` of
+            the L1 weights, in the units of the residuals; a tensor
+            :math:`(R)` gives each residual its own (residuals of
+            different units). Below it the loss is quadratic, as Huber's.
+            (default: :obj:`1e-3`)
         max_step (float, optional): Longest step of any one parameter in
             one iteration (a trust region in parameter units, which keeps
             a fit near its start where the objective has several minima).
@@ -103,7 +108,12 @@ def levenberg_marquardt(residual: Callable[[Tensor], Tensor], x0: Tensor,
     max_iter = check_positive_int(max_iter, 'max_iter', minimum=0)
     tol = check_positive_float(tol, 'tol', allow_zero=True)
     damping = check_positive_float(damping, 'damping')
-    l1_epsilon = check_positive_float(l1_epsilon, 'l1_epsilon')
+    if isinstance(l1_epsilon, Tensor):
+        if l1_epsilon.dim() != 1 or not bool((l1_epsilon > 0).all()):
+            raise ValueError("'l1_epsilon' must be a positive number or a "
+                             "positive tensor [R], one per residual")
+    else:
+        l1_epsilon = check_positive_float(l1_epsilon, 'l1_epsilon')
     if max_step is not None:
         max_step = check_positive_float(max_step, 'max_step')
     num, num_params = x.shape
@@ -124,6 +134,11 @@ def levenberg_marquardt(residual: Callable[[Tensor], Tensor], x0: Tensor,
     weight = check_float_tensor(weight, 'weight', r.shape)
     if bool((weight < 0).any()):
         raise ValueError("'weight' must be non-negative")
+    if isinstance(l1_epsilon, Tensor):
+        if l1_epsilon.numel() != r.size(1):
+            raise ValueError(f"'l1_epsilon' holds {l1_epsilon.numel()} "
+                             f"values for {r.size(1)} residuals per row")
+        l1_epsilon = l1_epsilon.to(r)
 
     info = LMInfo()
     cost = _objective(weight, r, loss)
@@ -143,7 +158,7 @@ def levenberg_marquardt(residual: Callable[[Tensor], Tensor], x0: Tensor,
             jac = jacobian(xa, rows)[1].detach()
         w = weight[rows]
         if loss == 'l1':
-            w = w / ra.abs().clamp_min(l1_epsilon)
+            w = w / torch.clamp(ra.abs(), min=l1_epsilon)
         jw = jac * w.unsqueeze(-1)
         hessian = jw.transpose(1, 2) @ jac                 # (n, P, P)
         gradient = (jw * ra.unsqueeze(-1)).sum(1)          # (n, P)
@@ -225,3 +240,171 @@ def _jacobian(residual, x: Tensor, rows: Tensor) -> Tensor:
     if derivative is None:  # the residuals do not depend on x
         return x.new_zeros(n, out.size(1), num_params)
     return derivative.view(num_params, n, -1).permute(1, 2, 0)
+
+
+def levenberg_marquardt_tv(jacobian: Callable[[Tensor], tuple], x0: Tensor,
+                           weight: Tensor, edges: Tensor, edge_weight: float,
+                           lower: Optional[Tensor] = None,
+                           upper: Optional[Tensor] = None,
+                           max_iter: int = 30, tol: float = 1e-6,
+                           damping: float = 1e-3,
+                           l1_epsilon: Union[float, Tensor] = 1e-3,
+                           tv_epsilon: float = 1e-2,
+                           max_step: Optional[float] = None,
+                           cg_iter: int = 50) -> tuple:
+    r"""Minimises the L1 fit of many small problems coupled by a total
+    variation over a graph,
+
+    .. math::
+        E(x) = \sum_n \sum_k w_{nk} |r_{nk}(x_n)|
+        + c \sum_{(i, j) \in \mathcal{E}} \sum_p |x_{ip} - x_{jp}|,
+        \qquad \text{lower} \le x \le \text{upper},
+
+    by Levenberg-Marquardt on all rows at once (the rows are no longer
+    independent: one damping, one acceptance). Each iteration reweights
+    both L1 terms (:math:`1 / \max(|r|, \epsilon)`, Huber-like below
+    :math:`\epsilon`) and solves the damped normal equations, whose matrix
+    is block diagonal (:math:`P \times P` per row) plus the weighted graph
+    Laplacian of the variation, by conjugate gradients preconditioned with
+    those blocks and the Laplacian's diagonal; the step is projected onto
+    the bounds and kept where :math:`E` decreased. Where
+    :func:`levenberg_marquardt` would pull each row towards its
+    neighbours' old values (block Jacobi, which spreads information one
+    edge per round), this solves for all rows together.
+
+    Args:
+        jacobian (callable): ``jacobian(x)`` returns the residuals
+            :math:`(N, R)` of all rows and their Jacobian :math:`(N, R, P)`.
+        x0 (torch.Tensor): Start :math:`(N, P)`, inside the bounds.
+        weight (torch.Tensor): Non-negative weights :math:`(N, R)`.
+        edges (torch.Tensor): Graph :math:`(2, E)`; each pair counted once
+            per occurrence.
+        edge_weight (float): :math:`c`.
+        lower, upper (torch.Tensor, optional): Bounds :math:`(P)`.
+            (default: :obj:`None`)
+        max_iter (int, optional): Iterations. (default: :obj:`30`)
+        tol (float, optional): Stop once an accepted step lowers :math:`E`
+            by less than :obj:`tol` times its value. (default: :obj:`1e-6`)
+        damping (float, optional): Initial :math:`\lambda`.
+            (default: :obj:`1e-3`)
+        l1_epsilon (float or torch.Tensor, optional): :math:`\epsilon` of
+            the residuals, or one per residual :math:`(R)`.
+            (default: :obj:`1e-3`)
+        tv_epsilon (float, optional): :math:`\epsilon` of the variation,
+            in parameter units. (default: :obj:`1e-2`)
+        max_step (float, optional): Longest step of any parameter.
+            (default: :obj:`None`)
+        cg_iter (int, optional): Conjugate-gradient iterations per step.
+            (default: :obj:`50`)
+
+    Returns:
+        ``(x, info)``: the parameters :math:`(N, P)` and an
+        :class:`LMInfo` (its objective is :math:`E` per row, averaged).
+    """
+    x = check_float_tensor(x0, 'x0', x0.shape).detach().clone()
+    if x.dim() != 2:
+        raise ValueError(f"'x0' must be [N, P] (one row per problem), got "
+                         f"{list(x.shape)}")
+    num, num_params = x.shape
+    edges = torch.as_tensor(edges, device=x.device)
+    if edges.dim() != 2 or edges.size(0) != 2 or edges.dtype != torch.long:
+        raise ValueError(f"'edges' must be a [2, E] long tensor, got "
+                         f"{list(edges.shape)} {edges.dtype}")
+    if edges.numel() and (int(edges.min()) < 0 or int(edges.max()) >= num):
+        raise ValueError(f"'edges' must index the {num} rows of 'x0'")
+    edge_weight = check_positive_float(edge_weight, 'edge_weight',
+                                       allow_zero=True)
+    tv_epsilon = check_positive_float(tv_epsilon, 'tv_epsilon')
+    max_iter = check_positive_int(max_iter, 'max_iter', minimum=0)
+    cg_iter = check_positive_int(cg_iter, 'cg_iter')
+    lam = check_positive_float(damping, 'damping')
+    lower = _bound(lower, 'lower', x, -float('inf'))
+    upper = _bound(upper, 'upper', x, float('inf'))
+    if bool(((x < lower) | (x > upper)).any()):
+        raise ValueError("'x0' lies outside the bounds; clamp it first")
+    i, j = edges
+
+    def evaluate(x):
+        r, jac = jacobian(x)
+        r, jac = r.detach(), jac.detach()
+        data = (weight * r.abs()).sum()
+        variation = edge_weight * (x[i] - x[j]).abs().sum()
+        return r, jac, float(data + variation)
+
+    r, jac, cost = evaluate(x)
+    if not (torch.isfinite(r).all() and math.isfinite(cost)):
+        raise ValueError("the residuals are NaN or infinite at 'x0'")
+    if isinstance(l1_epsilon, Tensor):
+        l1_epsilon = l1_epsilon.to(r)
+    info = LMInfo(objective=[cost / num])
+    for _ in range(max_iter):
+        w = weight / torch.clamp(r.abs(), min=l1_epsilon)
+        jw = jac * w.unsqueeze(-1)
+        blocks = jw.transpose(1, 2) @ jac                  # (N, P, P)
+        gradient = (jw * r.unsqueeze(-1)).sum(1)          # (N, P)
+        diff = x[i] - x[j]
+        we = edge_weight / diff.abs().clamp_min(tv_epsilon)   # (E, P)
+        pull = we * diff
+        gradient = gradient.index_add(0, i, pull).index_add(0, j, -pull)
+        degree = torch.zeros_like(x).index_add(0, i, we).index_add(0, j, we)
+        while True:
+            diagonal = torch.diagonal(blocks, dim1=1, dim2=2) + degree
+            scale = diagonal.amax(1, keepdim=True).clamp_min(1e-30)
+            damp = lam * (diagonal + 1e-9 * scale) + 1e-12 * scale
+
+            def apply(v):
+                out = (blocks @ v.unsqueeze(-1))[..., 0] + damp * v
+                dv = we * (v[i] - v[j])
+                return out.index_add(0, i, dv).index_add(0, j, -dv)
+
+            preconditioner = torch.linalg.inv(
+                blocks + torch.diag_embed(degree + damp))
+            step = _conjugate_gradients(apply, -gradient, preconditioner,
+                                        cg_iter)
+            if max_step is not None:
+                longest = step.abs().amax(1, keepdim=True)
+                step = step * (max_step / longest.clamp_min(max_step))
+            trial = torch.minimum(torch.maximum(x + step, lower), upper)
+            r_trial, jac_trial, new_cost = evaluate(trial)
+            if math.isfinite(new_cost) and new_cost < cost:
+                gain = (cost - new_cost) / max(cost, 1e-300)
+                x, r, jac, cost = trial, r_trial, jac_trial, new_cost
+                lam /= 3
+                break
+            lam *= 4
+            if lam > 1e8:
+                gain = 0.0
+                break
+        info.iterations += 1
+        info.objective.append(cost / num)
+        if gain < tol:
+            info.converged = True
+            break
+    return x, info
+
+
+def _conjugate_gradients(apply, rhs: Tensor, preconditioner: Tensor,
+                         iterations: int, rtol: float = 1e-4) -> Tensor:
+    """Preconditioned CG on the flattened unknowns; ``preconditioner``
+    holds the inverse of each row's block."""
+    def precondition(v):
+        return (preconditioner @ v.unsqueeze(-1))[..., 0]
+
+    x = precondition(rhs)
+    residual = rhs - apply(x)
+    z = precondition(residual)
+    direction = z
+    rz = (residual * z).sum()
+    target = rtol * float(rhs.norm())
+    for _ in range(iterations):
+        if float(residual.norm()) <= target:
+            break
+        ad = apply(direction)
+        alpha = rz / (direction * ad).sum().clamp_min(1e-300)
+        x = x + alpha * direction
+        residual = residual - alpha * ad
+        z = precondition(residual)
+        rz_new = (residual * z).sum()
+        direction = z + (rz_new / rz.clamp_min(1e-300)) * direction
+        rz = rz_new
+    return x

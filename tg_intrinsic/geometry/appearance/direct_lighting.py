@@ -1,0 +1,370 @@
+r"""The full reflection integral of direct environment lighting, tabulated
+over the roughness, in torch (CPU or GPU): the model of the full-integral
+refinement of :meth:`~tg_intrinsic.nn.FrequencySVBRDF.refine`.
+
+For a principled material (Lambert + GGX, Smith, Schlick; the BRDF of
+:mod:`~tg_intrinsic.geometry.appearance.lighting`) lit by a distant
+environment :math:`L` with visibility :math:`V(\mathbf{p}, \omega)`, the
+outgoing radiance is linear in the diffuse albedo :math:`K_d` and in
+:math:`R_0`, and non-linear only in the roughness :math:`r`:
+
+.. math::
+    B(\mathbf{p}, \omega_o) = \frac{K_d}{\pi} E(\mathbf{p})
+    + R_0\, A(\mathbf{p}, \omega_o; r) + C(\mathbf{p}, \omega_o; r),
+
+with the shadowed irradiance :math:`E = \int L V \cos\theta_i\,d\omega_i`
+and, from Schlick's :math:`F = R_0 (1 - s) + s`, :math:`s = (1 - \omega_o
+\cdot \mathbf{h})^5`,
+
+.. math::
+    A = \int L V \frac{D\,G_1(\omega_i)\,G_1(\omega_o)}{4\cos\theta_o}
+    (1 - s)\, d\omega_i, \qquad
+    C = \int L V \frac{D\,G_1(\omega_i)\,G_1(\omega_o)}{4\cos\theta_o}\,
+    s\, d\omega_i.
+
+:func:`reflection_tables` evaluates :math:`A` and :math:`C` for every
+observed (point, view) pair on a grid of roughness values, so that a fit
+needs no more rendering: between grid values the model interpolates
+linearly. The integrals are estimated by multiple importance sampling
+(balance heuristic) of GGX visible normals (Heitz 2018) and of the
+environment's pixels, with the same random numbers at every roughness
+(the table is smooth in :math:`r`) and a fixed seed (it is
+deterministic). :math:`E` is a quadrature over every pixel of the map.
+"""
+import math
+from typing import Optional, Tuple
+
+import torch
+from torch import Tensor
+
+from ..checks import (check_points, check_positive_int, check_seed,
+                      check_tensor)
+from .brdf import model_alpha
+from .envmap import (check_envmap, direction_to_equirect, equirect_directions,
+                     equirect_lookup, equirect_solid_angles)
+from .raster import point_visibility
+from .sh import smith_g1
+
+__all__ = ['reflection_tables', 'direction_visibility', 'tangent_frames']
+
+def tangent_frames(normal: Tensor) -> Tensor:
+    r"""Orthonormal frames :math:`(N, 3, 3)` with rows :math:`(t, b, n)`
+    (Duff et al. 2017: continuous except at :math:`n_z = 0^-`)."""
+    x, y, z = normal.unbind(-1)
+    sign = torch.where(z >= 0, torch.ones_like(z), -torch.ones_like(z))
+    a = -1.0 / (sign + z)
+    b = x * y * a
+    t = torch.stack([1 + sign * x * x * a, sign * b, -sign * x], -1)
+    bt = torch.stack([b, sign + y * y * a, -y], -1)
+    return torch.stack([t, bt, normal], -2)
+
+
+def direction_visibility(points: Tensor, normal: Tensor, vertices: Tensor,
+                         faces: Tensor, resolution: Tuple[int, int] = (16, 32),
+                         offset: float = 1e-4) -> Tensor:
+    r"""Which directions of the sky each point sees, on an equirectangular
+    grid of :obj:`resolution` cells: a ray from the point (moved by
+    :obj:`offset` times the object's size along its normal, so that it
+    leaves its own triangles) towards each cell centre that crosses no
+    triangle. Exact ray casting
+    (:func:`~tg_intrinsic.geometry.appearance.raster.point_visibility`)
+    from one distant camera per direction, so the cost is one rasterisation
+    of the mesh per cell. Directions below a point's horizon are not
+    excluded here (the integrands are zero there).
+
+    Args:
+        points (torch.Tensor): :math:`(N, 3)`, on the mesh.
+        normal (torch.Tensor): Unit normals :math:`(N, 3)`.
+        vertices (torch.Tensor): Mesh positions :math:`(n, 3)`.
+        faces (torch.Tensor): Triangles :math:`(3, F)`.
+        resolution (tuple, optional): ``(rows, columns)`` of the grid.
+            (default: :obj:`(16, 32)`)
+        offset (float, optional): Normal offset relative to the bounding
+            box diagonal. (default: :obj:`1e-4`)
+
+    Returns:
+        Bool :math:`(N, \text{rows} \cdot \text{columns})`.
+    """
+    points = check_points(points, 'points')
+    rows, cols = (check_positive_int(r, 'resolution') for r in resolution)
+    pos = vertices.detach().double().cpu()
+    lo, hi = pos.min(0).values, pos.max(0).values
+    centre, size = (lo + hi) / 2, float((hi - lo).norm())
+    start = points.detach().double().cpu() \
+        + offset * size * normal.detach().double().cpu()
+    directions = equirect_directions(rows, cols).reshape(-1, 3)
+    # distant pinhole cameras looking back along each direction; their
+    # image just holds the object
+    distance = 1e2 * size
+    eye = centre + distance * directions
+    forward = -directions
+    helper = torch.where(forward[:, 2:].abs() < 0.9,
+                         torch.tensor([0.0, 0.0, 1.0]).double().expand_as(
+                             forward),
+                         torch.tensor([1.0, 0.0, 0.0]).double().expand_as(
+                             forward))
+    right = torch.nn.functional.normalize(torch.cross(forward, helper,
+                                                      dim=-1), dim=-1)
+    down = torch.cross(forward, right, dim=-1)
+    rotation = torch.stack([right, down, forward], 1)
+    translation = -(rotation @ eye.unsqueeze(-1))
+    extrinsics = torch.cat([rotation, translation], -1)
+    pixels = 64
+    focal = pixels / 2 / (1.2 * size / 2 / distance)
+    intrinsics = torch.tensor([[focal, 0, pixels / 2], [0, focal, pixels / 2],
+                               [0, 0, 1]]).double().expand(len(directions), 3,
+                                                           3)
+    # the lifted point is off its triangles: any hit in front occludes
+    return point_visibility(start, pos, faces, intrinsics, extrinsics,
+                            pixels, pixels, rel_tol=1e-12).to(points.device)
+
+
+class _Environment:
+    """An environment map prepared for sampling: bilinear radiance,
+    pixel probabilities proportional to solid angle times the brightest
+    radiance of the 3 x 3 neighbourhood (every direction whose bilinear
+    radiance is non-zero has a non-zero density) and their CDF."""
+    def __init__(self, envmap: Tensor):
+        self.map = envmap
+        self.height, self.width = envmap.shape[:2]
+        dtype, device = envmap.dtype, envmap.device
+        luminance = envmap.mean(-1)
+        padded = torch.cat([luminance[:, -1:], luminance, luminance[:, :1]],
+                           1)
+        padded = torch.nn.functional.pad(padded[None, None], (0, 0, 1, 1),
+                                         mode='replicate')
+        bright = torch.nn.functional.max_pool2d(padded, 3, 1)[0, 0]
+        self.solid_angle = equirect_solid_angles(self.height, self.width,
+                                                 dtype, device)
+        weight = (bright * self.solid_angle).flatten()
+        if float(weight.sum()) <= 0:
+            weight = self.solid_angle.flatten().clone()
+        self.probability = weight / weight.sum()
+        self.cdf = torch.cumsum(self.probability, 0)
+        self.cdf[-1] = 1.0
+
+    def density(self, directions: Tensor) -> Tensor:
+        """Density per solid angle of the pixel sampling at
+        ``directions``."""
+        row, col = direction_to_equirect(directions, self.height, self.width)
+        row = row.long().clamp(0, self.height - 1)
+        col = col.long().clamp(0, self.width - 1)
+        index = row * self.width + col
+        return self.probability[index] / self.solid_angle.flatten()[index]
+
+    def sample(self, u0: Tensor, u1: Tensor, u2: Tensor):
+        """Directions from three uniform numbers: a pixel by the CDF, then
+        uniform in solid angle inside it; and their density."""
+        index = torch.searchsorted(self.cdf, u0.contiguous(), right=True
+                                   ).clamp(max=self.cdf.numel() - 1)
+        row, col = index // self.width, index % self.width
+        top = torch.cos(row.to(u1.dtype) * (math.pi / self.height))
+        bottom = torch.cos((row + 1).to(u1.dtype) * (math.pi / self.height))
+        z = top + (bottom - top) * u1
+        phi = (col.to(u2.dtype) + u2) * (2 * math.pi / self.width) - math.pi
+        radius = (1 - z * z).clamp_min(0).sqrt()
+        directions = torch.stack([radius * torch.cos(phi),
+                                  radius * torch.sin(phi), z], -1)
+        density = self.probability[index] / self.solid_angle.flatten()[index]
+        return directions, density
+
+
+def _ggx(cos_h: Tensor, alpha: Tensor) -> Tensor:
+    a2 = alpha * alpha
+    return a2 / (math.pi * ((cos_h * cos_h) * (a2 - 1) + 1) ** 2)
+
+
+def _visible_normals(view: Tensor, alpha: Tensor, u1: Tensor, u2: Tensor):
+    """GGX normals distributed as the normals visible from ``view`` (local
+    frames, Heitz 2018), broadcast over ``view`` :math:`(C, 1, 1, 3)`,
+    ``alpha`` :math:`(1, G, 1)` and the uniforms :math:`(C, 1, S)`."""
+    vx, vy, vz = view.unbind(-1)
+    stretched = torch.stack(torch.broadcast_tensors(alpha * vx, alpha * vy,
+                                                    vz), -1)
+    stretched = torch.nn.functional.normalize(stretched, dim=-1)
+    sx, sy, sz = stretched.unbind(-1)
+    length = (sx * sx + sy * sy).sqrt()
+    flat = length < 1e-12
+    safe = torch.where(flat, torch.ones_like(length), length)
+    t1x = torch.where(flat, torch.ones_like(sx), -sy / safe)
+    t1y = torch.where(flat, torch.zeros_like(sx), sx / safe)
+    t2x, t2y, t2z = -sz * t1y, sz * t1x, sx * t1y - sy * t1x
+    r = u1.sqrt()
+    angle = 2 * math.pi * u2
+    p1, p2 = r * torch.cos(angle), r * torch.sin(angle)
+    blend = 0.5 * (1 + sz)
+    p2 = (1 - blend) * (1 - p1 * p1).clamp_min(0).sqrt() + blend * p2
+    p3 = (1 - p1 * p1 - p2 * p2).clamp_min(0).sqrt()
+    hx = alpha * (p1 * t1x + p2 * t2x + p3 * sx)
+    hy = alpha * (p1 * t1y + p2 * t2y + p3 * sy)
+    hz = (p2 * t2z + p3 * sz).clamp_min(0)
+    return torch.nn.functional.normalize(torch.stack([hx, hy, hz], -1),
+                                         dim=-1)
+
+
+def _uniforms(count: int, samples: int, dimension: int, seed: int, salt: int,
+              dtype, device) -> Tensor:
+    """Consecutive blocks of ``samples`` points of one scrambled Sobol
+    sequence, :math:`(count, samples, dimension)`: each block is
+    stratified in every coordinate and in their pairs (randomised
+    quasi-Monte Carlo; independent coordinates matter: a pixel and the
+    position inside it must not be drawn from correlated numbers). Drawn
+    on the CPU, so the numbers do not depend on the device."""
+    engine = torch.quasirandom.SobolEngine(dimension, scramble=True,
+                                           seed=seed * 7919 + salt)
+    return engine.draw(count * samples, dtype=torch.float64).view(
+        count, samples, dimension).to(device, dtype)
+
+
+def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
+                      envmap: Tensor, roughness: Tensor,
+                      visibility: Optional[Tensor] = None,
+                      light_samples: int = 64, brdf_samples: int = 32,
+                      seed: int = 0, chunk: int = 512):
+    r"""The shadowed irradiance :math:`E` and the specular integrals
+    :math:`A, C` of the module docstring at every roughness of a grid.
+
+    Args:
+        normal (torch.Tensor): Unit normals :math:`(N, 3)`.
+        view_dirs (torch.Tensor): Unit directions to the cameras
+            :math:`(N, V, 3)`.
+        mask (torch.Tensor): Observed pairs :math:`(N, V)`; the others
+            get zeros.
+        envmap (torch.Tensor): Equirectangular radiance :math:`(H, W, 3)`,
+            :math:`z` up.
+        roughness (torch.Tensor): Increasing grid :math:`(G)` of
+            perceptual roughness (:math:`\alpha = r^2`, at least
+            :data:`~tg_intrinsic.geometry.appearance.brdf.MIN_ALPHA`).
+        visibility (torch.Tensor, optional): :math:`(N, R \cdot Q)` from
+            :func:`direction_visibility` on an :math:`(R, Q)` grid (any
+            :math:`R = Q / 2`); :obj:`None` sees every direction above the
+            horizon. (default: :obj:`None`)
+        light_samples (int, optional): Environment samples per point,
+            shared by its views. (default: :obj:`64`)
+        brdf_samples (int, optional): Visible-normal samples per pair and
+            roughness. (default: :obj:`32`)
+        seed (int, optional): Seed of the sample shifts. (default: :obj:`0`)
+        chunk (int, optional): Pairs evaluated at once (memory).
+            (default: :obj:`512`)
+
+    Returns:
+        ``(irradiance, tables)``: :math:`E` :math:`(N, 3)` and
+        :math:`(A, C)` as :math:`(N, V, G, 2, 3)`.
+    """
+    normal = check_tensor(normal, 'normal')
+    num, views = view_dirs.shape[:2]
+    if normal.shape != (num, 3) or view_dirs.shape != (num, views, 3) \
+            or mask.shape != (num, views):
+        raise ValueError(f"'normal' (N, 3), 'view_dirs' (N, V, 3) and "
+                         f"'mask' (N, V) must agree, got {tuple(normal.shape)}"
+                         f", {tuple(view_dirs.shape)}, {tuple(mask.shape)}")
+    envmap = check_envmap(envmap).to(normal.device, normal.dtype)
+    roughness = check_tensor(roughness, 'roughness').to(normal)
+    if roughness.dim() != 1 or roughness.numel() < 2 \
+            or bool((roughness.diff() <= 0).any()) \
+            or float(roughness[0]) < 0 or float(roughness[-1]) > 1:
+        raise ValueError("'roughness' must be an increasing grid of at least "
+                         "2 values in [0, 1]")
+    light_samples = check_positive_int(light_samples, 'light_samples')
+    brdf_samples = check_positive_int(brdf_samples, 'brdf_samples')
+    chunk = check_positive_int(chunk, 'chunk')
+    seed = check_seed(seed)
+    dtype, device = normal.dtype, normal.device
+    if visibility is not None:
+        if visibility.dim() != 2 or visibility.size(0) != num:
+            raise ValueError(f"'visibility' must be (N, cells) with N = {num},"
+                             f" got {tuple(visibility.shape)}")
+        cells = visibility.size(1)
+        grid_rows = int(round(math.sqrt(cells / 2)))
+        if 2 * grid_rows * grid_rows != cells:
+            raise ValueError(f"'visibility' must hold an (R, 2R) grid of "
+                             f"cells per point, got {cells} cells")
+        visibility = visibility.to(device=device, dtype=dtype)
+
+    def visible(points: Tensor, directions: Tensor) -> Tensor:
+        if visibility is None:
+            return torch.ones(directions.shape[:-1], dtype=dtype,
+                              device=device)
+        row, col = direction_to_equirect(directions, grid_rows, 2 * grid_rows)
+        cell = row.long().clamp(0, grid_rows - 1) * 2 * grid_rows \
+            + col.long().clamp(0, 2 * grid_rows - 1)
+        return visibility[points.view(-1, *([1] * (cell.dim() - 1))), cell]
+
+    frames = tangent_frames(normal)
+    environment = _Environment(envmap)
+    irradiance = _irradiance(normal, environment, visible)
+    alpha = model_alpha(roughness).view(1, -1, 1)
+
+    # environment samples: one set per point, shared by its views
+    light_dir, light_density = environment.sample(*_uniforms(
+        num, light_samples, 3, seed, 1, dtype, device).unbind(-1))
+    light = equirect_lookup(envmap, light_dir) \
+        * visible(torch.arange(num, device=device), light_dir).unsqueeze(-1)
+    light_local = torch.einsum('nij,nsj->nsi', frames, light_dir)
+
+    tables = torch.zeros(num, views, roughness.numel(), 2, 3, dtype=dtype,
+                         device=device)
+    point, view = mask.nonzero(as_tuple=True)
+    brdf_u1, brdf_u2 = _uniforms(point.numel(), brdf_samples, 2, seed, 2,
+                                 dtype, device).unbind(-1)
+    for start in range(0, point.numel(), chunk):
+        p, v = point[start:start + chunk], view[start:start + chunk]
+        out = torch.einsum('cij,cj->ci', frames[p], view_dirs[p, v].to(dtype))
+        out = torch.nn.functional.normalize(out, dim=-1)
+        cos_o = out[:, 2].clamp_min(1e-6)
+        out = out.view(-1, 1, 1, 3)
+        g1_out = smith_g1(cos_o.view(-1, 1, 1), alpha)
+        b1 = brdf_u1[start:start + chunk].unsqueeze(1)
+        b2 = brdf_u2[start:start + chunk].unsqueeze(1)
+
+        def accumulate(incoming, half, radiance, env_density):
+            # balance heuristic: every sample of either strategy is
+            # weighted by the sum of both sample densities
+            cos_i = incoming[..., 2]
+            ggx = _ggx(half[..., 2].clamp_min(0), alpha)
+            brdf_density = g1_out * ggx / (4 * cos_o.view(-1, 1, 1))
+            integrand = brdf_density * smith_g1(cos_i, alpha)
+            weight = torch.where(
+                cos_i > 0, integrand / (brdf_samples * brdf_density
+                                        + light_samples * env_density
+                                        ).clamp_min(1e-300),
+                torch.zeros_like(integrand))
+            schlick = (1 - (out * half).sum(-1).clamp(0, 1)) ** 5
+            a = (weight * (1 - schlick)).unsqueeze(-1) * radiance
+            c = (weight * schlick).unsqueeze(-1) * radiance
+            return torch.stack([a.sum(2), c.sum(2)], 2)
+
+        # visible-normal samples
+        half = _visible_normals(out, alpha, b1, b2)
+        incoming = 2 * (out * half).sum(-1, keepdim=True) * half - out
+        world = torch.einsum('cij,cgsi->cgsj', frames[p], incoming)
+        radiance = equirect_lookup(envmap, world) \
+            * visible(p, world).unsqueeze(-1)
+        result = accumulate(incoming, half, radiance,
+                            environment.density(world))
+        # environment samples
+        incoming = light_local[p].unsqueeze(1)
+        half = torch.nn.functional.normalize(incoming + out, dim=-1)
+        tables[p, v] = result + accumulate(incoming, half,
+                                           light[p].unsqueeze(1),
+                                           light_density[p].unsqueeze(1))
+    return irradiance, tables
+
+
+def _irradiance(normal: Tensor, environment: _Environment, visible
+                ) -> Tensor:
+    r""":math:`E = \sum_p L_p V_p \Omega_p \max(0, n \cdot \omega_p)`
+    over every pixel of the map, a chunk of points at a time."""
+    env = environment.map
+    height, width = env.shape[:2]
+    directions = equirect_directions(height, width, env.dtype, env.device
+                                     ).reshape(-1, 3)
+    light = env.reshape(-1, 3) * environment.solid_angle.reshape(-1, 1)
+    out = []
+    for start in range(0, normal.size(0), 256):
+        n = normal[start:start + 256]
+        points = torch.arange(start, start + n.size(0), device=n.device)
+        cosine = (n @ directions.T).clamp_min(0) * visible(
+            points, directions.unsqueeze(0).expand(n.size(0), -1, -1))
+        out.append(cosine @ light)
+    return torch.cat(out)

@@ -10,15 +10,21 @@ images:
 - ours: ``ProjectViews`` -> ``FitSphericalHarmonics`` ->
   ``SpectralUncertainty`` -> ``FrequencySVBRDF.fit`` (the paper's mixed
   recovery, initialised from the spectrum), by Adam (the original's 300
-  steps) and by the per-point Levenberg-Marquardt solver;
+  steps) and by the Levenberg-Marquardt solver; with the metallic map held
+  at 1 (what Mitsuba is told); and that, followed by
+  ``FrequencySVBRDF.refine`` against the full integral of the light;
 - Mitsuba: differentiable path replay (``prb``, direct light), Adam on the
-  per-vertex base colour and roughness from 0.5, one random view per step.
+  per-vertex base colour and roughness from 0.5, one random view per step;
+  and the same started from our SH recovery (the paper's "ours +
+  Mitsuba", Table 5.5).
 
 It reports the time each takes to reach our final roughness MAE and base
 colour RMSE (Mitsuba's curve of error against time is sampled every step
-steps). Needs ``pip install mitsuba`` (the ``llvm_ad_rgb`` variant needs
-``apt-get install libllvm19``; ``cuda_ad_rgb`` is used when a GPU is
-present); without it the script says so and exits.
+at first), and who first gets within 5% of the lowest errors of Mitsuba's
+curve ("Mitsuba's best"). Needs ``pip install mitsuba`` (the
+``llvm_ad_rgb`` variant needs an LLVM that Mitsuba's version supports;
+``cuda_ad_rgb`` is used when a GPU is present); without it the script says
+so and exits.
 
 Writes ``benchmarks/results/svbrdf_mitsuba.json`` and ``.png``.
 
@@ -72,8 +78,11 @@ OURS = {'mixed (eq. 5.11, l* = 5), Adam': (5, 'eq5.11', 'adam', None, False),
         'split-sum (l* = 8), LM': (8, 'split_sum', 'lm', None, False),
         # what Mitsuba is told too: the object is a metal
         'mixed LM, metallic 1': (5, 'eq5.11', 'lm', 1.0, False),
-        'mixed LM, metallic 1, + full-integral refinement': (
+        # a short SH fit (5 iterations, one round) starts the refinement
+        'mixed LM (5 iterations), metallic 1, + full-integral refinement': (
             5, 'eq5.11', 'lm', 1.0, True)}
+#: "Mitsuba's best": this factor times the lowest error of its curve.
+BEST_TOLERANCE = 1.05
 #: The variant that initialises Mitsuba in "ours + prb".
 INITIALISER = 'mixed LM, metallic 1'
 
@@ -91,8 +100,9 @@ def ours(data, images, steps, l_max, model, solver, metallic, refine):
         FitSphericalHarmonics(l_max=l_max)(capture))
     prepared = time.perf_counter() - start
     model = FrequencySVBRDF(capture.num_nodes, specular_model=model)
+    fit_steps = (5 if refine else None) if solver == 'lm' else steps
     result = model.fit(
-        capture, steps=steps if solver == 'adam' else None, lr=0.02,
+        capture, steps=fit_steps, rounds=1 if refine else 3, lr=0.02,
         tv_weight=0.02, solver=solver, progress=False, metallic=metallic)
     if refine:
         result = model.refine(capture, tv_weight=0.02, metallic=metallic,
@@ -179,6 +189,15 @@ def plot(rows, variant, path):
     fig.legend(handles, labels, loc='lower center', ncol=3, fontsize=7)
     fig.tight_layout(rect=(0, 0.36, 1, 1))
     atomic_write(path, lambda f: fig.savefig(f, format='png', dpi=120), 'wb')
+
+
+def save(args, mi, variant, rows):
+    os.makedirs(args.out, exist_ok=True)
+    atomic_write_json(os.path.join(args.out, 'svbrdf_mitsuba.json'), {
+        'machine': machine_info(), 'mitsuba': mi.__version__,
+        'variant': variant, 'args': vars(args), 'best_tolerance':
+        BEST_TOLERANCE, 'rows': rows})
+    plot(rows, variant, os.path.join(args.out, 'svbrdf_mitsuba.png'))
 
 
 def main():
@@ -284,8 +303,9 @@ def main():
             print(f"{name}: Mitsuba reaches ours ({label}) after "
                   f"{result['mitsuba_seconds_to_both']} s (ours "
                   f"{result['seconds']:.1f} s)", flush=True)
-        # Mitsuba's best: where its curve ends; who gets there first
-        best = {key: curve[-1][key]
+        # Mitsuba's best: within 5% of the lowest error its curve reaches
+        # on each metric (the curve is noisy); who gets there first
+        best = {key: BEST_TOLERANCE * min(point[key] for point in curve)
                 for key in ('roughness_mae', 'base_color_rmse')}
         prb_seconds = first_time(curve, best)
         start = maps[INITIALISER]
@@ -313,11 +333,8 @@ def main():
         rows.append(row)
         print(f"{name}: Mitsuba after {curve[-1]['seconds']:.0f} s: "
               f"{curve[-1]}", flush=True)
-    os.makedirs(args.out, exist_ok=True)
-    atomic_write_json(os.path.join(args.out, 'svbrdf_mitsuba.json'), {
-        'machine': machine_info(), 'mitsuba': mi.__version__,
-        'variant': variant, 'args': vars(args), 'rows': rows})
-    plot(rows, variant, os.path.join(args.out, 'svbrdf_mitsuba.png'))
+        # drjit 3.6 can abort in its thread pool: keep what is done
+        save(args, mi, variant, rows)
 
 if __name__ == '__main__':
     main()

@@ -209,6 +209,7 @@ def test_cameras():
     for k, e, match in [
             (K, E, r'\[V, 3, 3\].*\[V, 3, 4\]'),
             (K.expand(2, 3, 3), E[None], "2 views but 'extrinsics' has 1"),
+            (K[None][:0], E[None][:0], r'no views \(0 cameras\)'),
             (K[None] * float('nan'), E[None], 'finite floating-point'),
             (flipped[None], E[None], 'fx, fy > 0'),
             (K[None], scaled[None], r'camera\(s\) \[0\] are not'),

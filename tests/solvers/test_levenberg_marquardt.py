@@ -2,13 +2,15 @@
 squares (scipy.optimize.least_squares, with and without bounds), L1
 regression (the exact optimum by linear programming), rows that do not
 influence each other, analytic and forward-mode Jacobians alike, and bad
-input."""
+input; and the solver whose rows are coupled by a total variation, against
+the linear program of L1 regression plus total variation."""
 import numpy as np
 import pytest
 import torch
 from scipy.optimize import least_squares, linprog
 
-from tg_intrinsic.solvers import LMInfo, levenberg_marquardt
+from tg_intrinsic.solvers import (LMInfo, levenberg_marquardt,
+                                  levenberg_marquardt_tv)
 
 D64 = torch.float64
 
@@ -119,9 +121,117 @@ def test_bad_input():
         (dict(residual=lambda v, rows: v.sum(1)), r"\[n, R\] residuals"),
         (dict(residual=lambda v, rows: residual(v, rows) / 0 * 0),
          'NaN or infinite'),
+        (dict(loss='l1', l1_epsilon=torch.ones(29, dtype=D64)),
+         "'l1_epsilon' holds 29 values for 30"),
+        (dict(loss='l1', l1_epsilon=-torch.ones(30, dtype=D64)),
+         "'l1_epsilon' must be a positive"),
     ]
     for change, match in cases:
         kwargs = dict(residual=residual, x0=x0)
         kwargs.update(change)
         with pytest.raises(ValueError, match=match):
             levenberg_marquardt(**kwargs)
+
+
+# ------------------------------------------------ coupled by total variation
+def chain(num=12, samples=6, params=2, seed=0):
+    """Linear rows r_n = A_n x_n - b_n along a path graph 0-1-...-(n-1)."""
+    g = torch.Generator().manual_seed(seed)
+    A = torch.randn(num, samples, params, dtype=D64, generator=g)
+    truth = torch.cumsum(0.3 * torch.randn(num, params, dtype=D64,
+                                           generator=g), 0)
+    b = (A @ truth.unsqueeze(-1))[..., 0] \
+        + 0.3 * torch.randn(num, samples, dtype=D64, generator=g)
+    edges = torch.stack([torch.arange(num - 1), torch.arange(1, num)])
+
+    def jacobian(x):
+        return (A @ x.unsqueeze(-1))[..., 0] - b, A
+    return A, b, edges, jacobian
+
+
+def tv_linear_program(A, b, edges, c):
+    """min sum |A x - b| + c sum_edges |x_i - x_j| as a linear program."""
+    num, samples, params = A.shape
+    unknowns = num * params
+    rows, rhs = [], []
+    blocks = np.zeros((num * samples, unknowns))
+    for n in range(num):
+        blocks[n * samples:(n + 1) * samples,
+               n * params:(n + 1) * params] = A[n].numpy()
+    diff = np.zeros((edges.size(1) * params, unknowns))
+    for e, (i, j) in enumerate(edges.t().tolist()):
+        for p in range(params):
+            diff[e * params + p, i * params + p] = 1
+            diff[e * params + p, j * params + p] = -1
+    s_r, s_e = num * samples, len(diff)
+    zeros = np.zeros
+    rows = np.block([
+        [blocks, -np.eye(s_r), zeros((s_r, s_e))],
+        [-blocks, -np.eye(s_r), zeros((s_r, s_e))],
+        [diff, zeros((s_e, s_r)), -np.eye(s_e)],
+        [-diff, zeros((s_e, s_r)), -np.eye(s_e)]])
+    y = b.numpy().ravel()
+    rhs = np.r_[y, -y, zeros(2 * s_e)]
+    cost = np.r_[zeros(unknowns), np.ones(s_r), c * np.ones(s_e)]
+    return linprog(cost, A_ub=rows, b_ub=rhs, bounds=[(None, None)]
+                   * unknowns + [(0, None)] * (s_r + s_e)).fun
+
+
+@pytest.mark.parametrize('c', [0.0, 0.3, 3.0])
+def test_total_variation_reaches_the_linear_programming_optimum(c):
+    A, b, edges, jacobian = chain()
+    x0 = torch.zeros(len(A), 2, dtype=D64)
+    x, info = levenberg_marquardt_tv(
+        jacobian, x0, torch.ones_like(b), edges, c, max_iter=300,
+        tol=1e-13, l1_epsilon=1e-7, tv_epsilon=1e-7, cg_iter=200)
+    objective = float((jacobian(x)[0].abs()).sum()
+                      + c * (x[1:] - x[:-1]).abs().sum())
+    optimum = tv_linear_program(A, b, edges, c)
+    assert objective <= optimum * (1 + 1e-4)
+    assert info.objective[-1] <= info.objective[0]
+
+
+def test_total_variation_without_weight_is_the_row_by_row_solver():
+    A, b, edges, jacobian = chain(seed=1)
+    x0 = torch.zeros(len(A), 2, dtype=D64)
+    coupled, _ = levenberg_marquardt_tv(jacobian, x0, torch.ones_like(b),
+                                        edges, 0.0, max_iter=200, tol=1e-13,
+                                        l1_epsilon=1e-7)
+    separate, _ = levenberg_marquardt(
+        lambda x, rows: (A[rows] @ x.unsqueeze(-1))[..., 0] - b[rows], x0,
+        loss='l1', max_iter=200, tol=1e-13, l1_epsilon=1e-7)
+    cost = [float(jacobian(x)[0].abs().sum()) for x in (coupled, separate)]
+    assert cost[0] == pytest.approx(cost[1], rel=1e-6)
+
+
+def test_total_variation_holds_bounds_and_step_limit():
+    A, b, edges, jacobian = chain(seed=2)
+    x0 = torch.zeros(len(A), 2, dtype=D64)
+    lower, upper = torch.tensor([-0.2, -0.1]), torch.tensor([0.2, 0.3])
+    x, _ = levenberg_marquardt_tv(jacobian, x0, torch.ones_like(b), edges,
+                                  0.3, lower, upper, max_iter=50)
+    assert bool((x >= lower.to(x)).all() and (x <= upper.to(x)).all())
+    one, _ = levenberg_marquardt_tv(jacobian, x0, torch.ones_like(b), edges,
+                                    0.3, max_iter=1, max_step=0.01)
+    assert float((one - x0).abs().max()) <= 0.01 + 1e-15
+
+
+def test_total_variation_bad_input():
+    A, b, edges, jacobian = chain()
+    x0 = torch.zeros(len(A), 2, dtype=D64)
+    weight = torch.ones_like(b)
+    cases = [
+        (dict(edges=edges[0]), r"'edges' must be a \[2, E\] long"),
+        (dict(edges=edges + 1), "'edges' must index the 12 rows"),
+        (dict(edge_weight=-1.0), "'edge_weight'"),
+        (dict(tv_epsilon=0.0), "'tv_epsilon'"),
+        (dict(x0=torch.zeros(12, dtype=D64)), r"'x0' must be \[N, P\]"),
+        (dict(lower=torch.tensor([0.5, 0.0])), "'x0' lies outside"),
+        (dict(jacobian=lambda x: (jacobian(x)[0] / 0, A)), 'NaN or infinite'),
+    ]
+    for change, match in cases:
+        kwargs = dict(jacobian=jacobian, x0=x0, weight=weight, edges=edges,
+                      edge_weight=0.3)
+        kwargs.update(change)
+        with pytest.raises(ValueError, match=match):
+            levenberg_marquardt_tv(**kwargs)

@@ -106,6 +106,13 @@ def add_arguments(parser):
                         help=f'total-variation weight over the surface '
                         f'graph, smoothing the maps (default: '
                         f'{tv_weight:g})')
+    parser.add_argument('--refine', type=nonnegative_int, default=0,
+                        metavar='N',
+                        help='then refine the maps against the full '
+                        'integral of the environment light with N '
+                        'Levenberg-Marquardt iterations per round, from the '
+                        'spherical-harmonic result (slower, more accurate; '
+                        '0: no refinement) (default: 0)')
     parser.add_argument('--device', default='cpu',
                         help='cpu, cuda, cuda:N or auto (cuda when there is '
                         'one) (default: cpu)')
@@ -263,6 +270,13 @@ def recover(args) -> int:
         result = model.fit(data, steps=steps, tv_weight=args.tv_weight,
                            metallic=args.metallic, solver=args.solver,
                            progress=not args.quiet)
+    if args.refine:
+        with stage(f'refining against the full integral ({args.refine} '
+                   f'steps)', args.quiet, seconds, 'refine'):
+            result = model.refine(data, steps=args.refine,
+                                  tv_weight=args.tv_weight,
+                                  metallic=args.metallic,
+                                  progress=not args.quiet)
     with stage('writing', args.quiet, seconds, 'write'):
         maps = result.maps()
         files = _write_outputs(out, data, result, maps,
@@ -286,6 +300,7 @@ def recover(args) -> int:
         'options': {'solver': args.solver, 'steps': steps, 'l_max': l_max,
                     'specular_model': args.specular_model,
                     'metallic': args.metallic, 'tv_weight': args.tv_weight,
+                    'refine': args.refine,
                     'device': str(device), 'dtype': args.dtype},
         'seconds': seconds,
         'initial_loss': result.loss[0],

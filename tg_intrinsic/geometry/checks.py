@@ -364,6 +364,9 @@ def check_cameras(intrinsics, extrinsics, like: Optional[Tensor] = None,
                          f"{list(extrinsics.shape)}")
     intrinsics = intrinsics.reshape(-1, 3, 3)
     extrinsics = extrinsics.reshape(-1, 3, 4)
+    if intrinsics.size(0) == 0 or extrinsics.size(0) == 0:
+        raise ValueError("there are no views (0 cameras); a capture needs "
+                         "at least one camera and its image")
     if intrinsics.size(0) != extrinsics.size(0):
         raise ValueError(f"'intrinsics' has {intrinsics.size(0)} views but "
                          f"'extrinsics' has {extrinsics.size(0)}")

@@ -8,7 +8,7 @@ import torch
 
 from tg_intrinsic.geometry.appearance.brdf import ggx_albedo
 from tg_intrinsic.geometry.appearance.direct_lighting import (
-    direction_visibility, reflection_tables, tangent_frames)
+    direction_visibility, reflection_tables, normal_frames)
 from tg_intrinsic.geometry.appearance.envmap import (equirect_directions,
                                                      irradiance)
 from tg_intrinsic.geometry.appearance.lighting import render_radiance
@@ -31,7 +31,7 @@ def test_frames_are_orthonormal_with_the_normal_last():
     normal, _, _ = random_pairs(200)
     normal = torch.cat([normal, torch.tensor([[0, 0, 1.0], [0, 0, -1.0]],
                                              dtype=D64)])
-    frames = tangent_frames(normal)
+    frames = normal_frames(normal)
     eye = torch.eye(3, dtype=D64).expand(len(normal), 3, 3)
     assert torch.allclose(frames @ frames.transpose(1, 2), eye, atol=1e-12)
     assert torch.allclose(frames[:, 2], normal)

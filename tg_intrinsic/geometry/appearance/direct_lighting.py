@@ -40,14 +40,16 @@ from torch import Tensor
 from ..checks import (check_points, check_positive_int, check_seed,
                       check_tensor)
 from .brdf import model_alpha
+from .cameras import look_at_cameras
 from .envmap import (check_envmap, direction_to_equirect, equirect_directions,
                      equirect_lookup, equirect_solid_angles)
 from .raster import point_visibility
 from .sh import smith_g1
 
-__all__ = ['reflection_tables', 'direction_visibility', 'tangent_frames']
+__all__ = ['reflection_tables', 'direction_visibility', 'normal_frames']
 
-def tangent_frames(normal: Tensor) -> Tensor:
+
+def normal_frames(normal: Tensor) -> Tensor:
     r"""Orthonormal frames :math:`(N, 3, 3)` with rows :math:`(t, b, n)`
     (Duff et al. 2017: continuous except at :math:`n_z = 0^-`)."""
     x, y, z = normal.unbind(-1)
@@ -96,24 +98,10 @@ def direction_visibility(points: Tensor, normal: Tensor, vertices: Tensor,
     # distant pinhole cameras looking back along each direction; their
     # image just holds the object
     distance = 1e2 * size
-    eye = centre + distance * directions
-    forward = -directions
-    helper = torch.where(forward[:, 2:].abs() < 0.9,
-                         torch.tensor([0.0, 0.0, 1.0]).double().expand_as(
-                             forward),
-                         torch.tensor([1.0, 0.0, 0.0]).double().expand_as(
-                             forward))
-    right = torch.nn.functional.normalize(torch.cross(forward, helper,
-                                                      dim=-1), dim=-1)
-    down = torch.cross(forward, right, dim=-1)
-    rotation = torch.stack([right, down, forward], 1)
-    translation = -(rotation @ eye.unsqueeze(-1))
-    extrinsics = torch.cat([rotation, translation], -1)
     pixels = 64
-    focal = pixels / 2 / (1.2 * size / 2 / distance)
-    intrinsics = torch.tensor([[focal, 0, pixels / 2], [0, focal, pixels / 2],
-                               [0, 0, 1]]).double().expand(len(directions), 3,
-                                                           3)
+    intrinsics, extrinsics = look_at_cameras(
+        centre + distance * directions, centre.tolist(),
+        2 * math.degrees(math.atan(0.6 * size / distance)), (pixels, pixels))
     # the lifted point is off its triangles: any hit in front occludes
     return point_visibility(start, pos, faces, intrinsics, extrinsics,
                             pixels, pixels, rel_tol=1e-12).to(points.device)
@@ -143,13 +131,15 @@ class _Environment:
         self.cdf = torch.cumsum(self.probability, 0)
         self.cdf[-1] = 1.0
 
-    def density(self, directions: Tensor) -> Tensor:
-        """Density per solid angle of the pixel sampling at
-        ``directions``."""
-        row, col = direction_to_equirect(directions, self.height, self.width)
-        row = row.long().clamp(0, self.height - 1)
-        col = col.long().clamp(0, self.width - 1)
-        index = row * self.width + col
+    def coordinates(self, directions: Tensor):
+        """Continuous pixel coordinates ``(row, col)`` of ``directions``."""
+        return direction_to_equirect(directions, self.height, self.width)
+
+    def density(self, row: Tensor, col: Tensor) -> Tensor:
+        """Density per solid angle of the pixel sampling at the pixel
+        coordinates ``(row, col)``."""
+        index = row.long().clamp(0, self.height - 1) * self.width \
+            + col.long().clamp(0, self.width - 1)
         return self.probability[index] / self.solid_angle.flatten()[index]
 
     def sample(self, u0: Tensor, u1: Tensor, u2: Tensor):
@@ -281,25 +271,29 @@ def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
                              f"cells per point, got {cells} cells")
         visibility = visibility.to(device=device, dtype=dtype)
 
-    def visible(points: Tensor, directions: Tensor) -> Tensor:
+    environment = _Environment(envmap)
+
+    def visible(points: Tensor, row: Tensor, col: Tensor) -> Tensor:
+        """Visibility of the points in the directions at the map's pixel
+        coordinates ``(row, col)``."""
         if visibility is None:
-            return torch.ones(directions.shape[:-1], dtype=dtype,
-                              device=device)
-        row, col = direction_to_equirect(directions, grid_rows, 2 * grid_rows)
-        cell = row.long().clamp(0, grid_rows - 1) * 2 * grid_rows \
-            + col.long().clamp(0, 2 * grid_rows - 1)
+            return torch.ones(row.shape, dtype=dtype, device=device)
+        cell = (row * (grid_rows / environment.height)).long().clamp(
+            0, grid_rows - 1) * (2 * grid_rows) + (col * (
+                2 * grid_rows / environment.width)).long().clamp(
+                    0, 2 * grid_rows - 1)
         return visibility[points.view(-1, *([1] * (cell.dim() - 1))), cell]
 
-    frames = tangent_frames(normal)
-    environment = _Environment(envmap)
+    frames = normal_frames(normal)
     irradiance = _irradiance(normal, environment, visible)
     alpha = model_alpha(roughness).view(1, -1, 1)
 
     # environment samples: one set per point, shared by its views
     light_dir, light_density = environment.sample(*_uniforms(
         num, light_samples, 3, seed, 1, dtype, device).unbind(-1))
-    light = equirect_lookup(envmap, light_dir) \
-        * visible(torch.arange(num, device=device), light_dir).unsqueeze(-1)
+    light = equirect_lookup(envmap, light_dir) * visible(
+        torch.arange(num, device=device),
+        *environment.coordinates(light_dir)).unsqueeze(-1)
     light_local = torch.einsum('nij,nsj->nsi', frames, light_dir)
 
     tables = torch.zeros(num, views, roughness.numel(), 2, 3, dtype=dtype,
@@ -338,10 +332,11 @@ def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
         half = _visible_normals(out, alpha, b1, b2)
         incoming = 2 * (out * half).sum(-1, keepdim=True) * half - out
         world = torch.einsum('cij,cgsi->cgsj', frames[p], incoming)
+        row, col = environment.coordinates(world)
         radiance = equirect_lookup(envmap, world) \
-            * visible(p, world).unsqueeze(-1)
+            * visible(p, row, col).unsqueeze(-1)
         result = accumulate(incoming, half, radiance,
-                            environment.density(world))
+                            environment.density(row, col))
         # environment samples
         incoming = light_local[p].unsqueeze(1)
         half = torch.nn.functional.normalize(incoming + out, dim=-1)
@@ -360,11 +355,16 @@ def _irradiance(normal: Tensor, environment: _Environment, visible
     directions = equirect_directions(height, width, env.dtype, env.device
                                      ).reshape(-1, 3)
     light = env.reshape(-1, 3) * environment.solid_angle.reshape(-1, 1)
+    # pixel centres sit at half-integer coordinates
+    row = (torch.arange(height, dtype=env.dtype, device=env.device) + 0.5
+           )[:, None].expand(height, width).reshape(1, -1)
+    col = (torch.arange(width, dtype=env.dtype, device=env.device) + 0.5
+           )[None, :].expand(height, width).reshape(1, -1)
     out = []
     for start in range(0, normal.size(0), 256):
         n = normal[start:start + 256]
         points = torch.arange(start, start + n.size(0), device=n.device)
         cosine = (n @ directions.T).clamp_min(0) * visible(
-            points, directions.unsqueeze(0).expand(n.size(0), -1, -1))
+            points, row.expand(n.size(0), -1), col.expand(n.size(0), -1))
         out.append(cosine @ light)
     return torch.cat(out)

@@ -165,7 +165,7 @@ def first_time(curve, targets):
 
 
 def plot(rows, variant, path):
-    fig, axes = plt.subplots(1, 2, figsize=(12, 7))
+    fig, axes = plt.subplots(1, 2, figsize=(12, 6.4))
     for ax, key, title in ((axes[0], 'roughness_mae', 'roughness MAE'),
                            (axes[1], 'base_color_rmse', 'base colour RMSE')):
         for row, colour in zip(rows, ('C0', 'C1', 'C2')):
@@ -187,7 +187,7 @@ def plot(rows, variant, path):
         ax.set_title(title, fontsize=9)
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc='lower center', ncol=3, fontsize=7)
-    fig.tight_layout(rect=(0, 0.36, 1, 1))
+    fig.tight_layout(rect=(0, 0.27, 1, 1))
     atomic_write(path, lambda f: fig.savefig(f, format='png', dpi=120), 'wb')
 
 
@@ -267,9 +267,9 @@ def main():
                           torch.full((data.num_nodes, ), 0.5)))),
                'ours': {}}
         maps = {}
-        for label, variant in OURS.items():
+        for label, setting in OURS.items():
             seconds, prepared, (rough, base), result = ours(
-                data, images, args.steps, *variant)
+                data, images, args.steps, *setting)
             maps[label] = result
             row['ours'][label] = {'seconds': seconds,
                                   'preparation_seconds': prepared,

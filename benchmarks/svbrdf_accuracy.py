@@ -71,17 +71,26 @@ METHODS = ('constant 0.5', 'spectrum', 'mixed', 'mixed+spectrum',
 GOALS = {'roughness_mae': 0.05, 'base_color_rmse': 0.03}
 
 
+def real_envmaps(rows: int = 128) -> dict:
+    """The HDR maps of ``shared/data/envmaps`` by name (``potsdamer_platz``,
+    ...), box-downsampled to about ``rows`` rows, float64; empty (with a
+    message) when the folder is missing. Shared by the SVBRDF benchmarks."""
+    maps = {}
+    if not os.path.isdir(ENVMAPS):
+        print(f'{ENVMAPS} not found: only procedural maps are used')
+        return maps
+    for name in sorted(os.listdir(ENVMAPS)):
+        if name.endswith(('.hdr', '.exr')):
+            env = read_envmap(os.path.join(ENVMAPS, name))
+            maps[name.split('_1k')[0].split('.')[0]] = downsample_envmap(
+                env.double(), max(1, env.size(0) // rows))
+    return maps
+
+
 def load_envmaps(quick):
     maps = {'sun_sky': sun_sky_envmap(
         128, 256, sun_angular_radius=0.3, dtype=torch.float64)}
-    if os.path.isdir(ENVMAPS):
-        for name in sorted(os.listdir(ENVMAPS)):
-            if name.endswith(('.hdr', '.exr')):
-                env = read_envmap(os.path.join(ENVMAPS, name))
-                maps[name.split('_1k')[0].split('.')[0]] = downsample_envmap(
-                    env.double(), max(1, env.size(0) // 128))
-    else:
-        print(f'{ENVMAPS} not found: only the procedural sky is used')
+    maps.update(real_envmaps())
     if quick:
         maps = dict(list(maps.items())[:2])
     return maps

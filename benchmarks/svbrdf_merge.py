@@ -45,17 +45,18 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), '..'))
 from tg_intrinsic.datasets import svbrdf_scene  # noqa: E402
-from tg_intrinsic.geometry.appearance.envmap import (  # noqa: E402
-    downsample_envmap, sun_sky_envmap)
-from tg_intrinsic.io import read_envmap  # noqa: E402
+from tg_intrinsic.geometry.appearance.envmap import \
+    sun_sky_envmap  # noqa: E402
 from tg_intrinsic.nn import FrequencySVBRDF, SVBRDFResult  # noqa: E402
 from tg_intrinsic.transforms import (FitSphericalHarmonics,  # noqa: E402
                                      SpectralUncertainty)
 from tg_intrinsic.utils import atomic_write, atomic_write_json  # noqa: E402
 from tg_intrinsic.utils import machine_info  # noqa: E402
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from svbrdf_accuracy import real_envmaps  # noqa: E402
+
 HERE = os.path.dirname(os.path.abspath(__file__))
-ENVMAPS = os.path.join(HERE, '..', '..', 'shared', 'data', 'envmaps')
 TOLERANCE = 0.10  # within 10% of the best single light
 METRICS = ('roughness_mae', 'base_color_rmse')
 
@@ -84,14 +85,7 @@ def load_envmaps(quick):
     }
     if quick:
         return dict(list(maps.items())[:3])
-    if os.path.isdir(ENVMAPS):
-        for name in sorted(os.listdir(ENVMAPS)):
-            if name.endswith(('.hdr', '.exr')):
-                env = read_envmap(os.path.join(ENVMAPS, name))
-                maps[name.split('_1k')[0].split('.')[0]] = downsample_envmap(
-                    env.double(), max(1, env.size(0) // 128))
-    else:
-        print(f'{ENVMAPS} not found: only the procedural maps are used')
+    maps.update(real_envmaps())
     return maps
 
 

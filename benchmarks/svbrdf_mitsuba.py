@@ -45,9 +45,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), '..'))
 from tg_intrinsic.datasets import svbrdf_scene  # noqa: E402
-from tg_intrinsic.geometry.appearance.envmap import (  # noqa: E402
-    downsample_envmap, sun_sky_envmap)
-from tg_intrinsic.io import read_envmap  # noqa: E402
+from tg_intrinsic.geometry.appearance.envmap import \
+    sun_sky_envmap  # noqa: E402
 from tg_intrinsic.nn import FrequencySVBRDF  # noqa: E402
 from tg_intrinsic.transforms import (FitSphericalHarmonics,  # noqa: E402
                                      ProjectViews, SpectralUncertainty)
@@ -58,7 +57,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), 'oracles'))
 from mitsuba_scene import build_scene  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ENVMAPS = os.path.join(HERE, '..', '..', 'shared', 'data', 'envmaps')
+sys.path.insert(0, HERE)
+from svbrdf_accuracy import real_envmaps  # noqa: E402
 
 
 def errors(data, base_color, roughness):
@@ -239,10 +239,9 @@ def main():
     torch.set_num_threads(os.cpu_count())
     envmaps = {'sun_sky': sun_sky_envmap(64, 128, sun_angular_radius=0.3,
                                          dtype=torch.float64)}
-    path = os.path.join(ENVMAPS, 'potsdamer_platz_1k.hdr')
-    if os.path.exists(path):
-        env = read_envmap(path).double()
-        envmaps['potsdamer_platz'] = downsample_envmap(env, env.size(0) // 64)
+    real = real_envmaps(64)
+    if 'potsdamer_platz' in real:
+        envmaps['potsdamer_platz'] = real['potsdamer_platz']
     size = (args.image_size, args.image_size)
     captures = {}
     # ours first for every map, so that drjit's worker threads (alive once

@@ -44,9 +44,6 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), '..'))
 from tg_intrinsic.datasets import svbrdf_scene  # noqa: E402
 from tg_intrinsic.geometry.appearance.cameras import (  # noqa: E402
     camera_centers)
-from tg_intrinsic.geometry.appearance.envmap import (  # noqa: E402
-    downsample_envmap)
-from tg_intrinsic.io import read_envmap  # noqa: E402
 from tg_intrinsic.nn import FrequencySVBRDF  # noqa: E402
 from tg_intrinsic.transforms import (FitSphericalHarmonics,  # noqa: E402
                                      SelectViews, SpectralUncertainty,
@@ -55,19 +52,15 @@ from tg_intrinsic.utils import atomic_write, atomic_write_json  # noqa: E402
 from tg_intrinsic.utils import machine_info  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ENVMAPS = os.path.join(HERE, '..', '..', 'shared', 'data', 'envmaps')
+sys.path.insert(0, HERE)
+from svbrdf_accuracy import real_envmaps  # noqa: E402
 METRICS = ('roughness_mae', 'base_color_rmse', 'mean_entropy')
 
 
 def lightings(quick):
     maps = {'sun_sky (scene)': 'sun_sky'}
-    if not quick and os.path.isdir(ENVMAPS):
-        names = sorted(n for n in os.listdir(ENVMAPS)
-                       if n.endswith(('.hdr', '.exr')))
-        if names:
-            env = read_envmap(os.path.join(ENVMAPS, names[0]))
-            maps[names[0].split('_1k')[0].split('.')[0]] = \
-                downsample_envmap(env.double(), max(1, env.size(0) // 128))
+    if not quick:
+        maps.update(list(real_envmaps().items())[:1])
     return maps
 
 

@@ -491,3 +491,22 @@ def test_bad_captures():
     blind.obs_mask = torch.zeros_like(blind.obs_mask)
     with pytest.raises(ValueError, match='no point is observed'):
         FrequencySVBRDF(blind.num_nodes).fit(blind, progress=False)
+
+
+def test_refine_texels_are_shadowed_by_the_mesh_they_were_cut_from():
+    from tg_intrinsic.geometry.texture import uv_sphere
+    data, _ = texel_data(texture_shape=(6, 12), num_views=12)
+    with pytest.raises(ValueError, match="'data.mesh_face' of texels"):
+        FrequencySVBRDF(data.num_nodes).refine(data, visibility='geometry',
+                                               progress=False)
+    data.mesh_pos, data.mesh_face = uv_sphere(6, 12)[:2]
+    results = []
+    for visibility in ('geometry', 'horizon'):
+        model = FrequencySVBRDF(data.num_nodes)
+        model.fit(data, solver='lm', steps=3, rounds=1, progress=False)
+        results.append(model.refine(data, visibility=visibility, steps=3,
+                                    rounds=1, progress=False))
+    assert results[0].texel_index is not None
+    # a convex mesh hides only what the horizon hides
+    assert float((results[0].roughness - results[1].roughness).abs().mean()
+                 ) < 0.02

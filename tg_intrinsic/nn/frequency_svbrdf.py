@@ -320,9 +320,11 @@ class FrequencySVBRDF(torch.nn.Module):
             metallic (float, optional): As for :meth:`fit`.
                 (default: :obj:`None`)
             visibility (str, optional): :obj:`'geometry'` (rays against the
-                mesh ``face``; needs it), :obj:`'horizon'` (every direction
-                above the tangent plane: convex objects) or :obj:`'auto'`
-                (geometry when the data has faces). (default: :obj:`'auto'`)
+                mesh: ``face`` over the points, or ``mesh_pos`` /
+                ``mesh_face`` that texels were cut from; needs one),
+                :obj:`'horizon'` (every direction above the tangent plane:
+                convex objects) or :obj:`'auto'` (geometry when there is a
+                mesh). (default: :obj:`'auto'`)
             roughness_cells (int, optional): Roughness values of the tables,
                 evenly spaced from :math:`\sqrt{\alpha_{min}}` to 1.
                 (default: :obj:`25`)
@@ -364,15 +366,23 @@ class FrequencySVBRDF(torch.nn.Module):
         if metallic is not None:
             with torch.no_grad():
                 self.metallic.fill_(metallic)
-        face = getattr(data, 'face', None)
-        if visibility == 'geometry' and face is None:
+        # the occluding mesh: the points' own, or the one their texels
+        # were cut from (TextureTexels)
+        if getattr(data, 'face', None) is not None:
+            mesh = data.pos, data.face
+        elif getattr(data, 'mesh_face', None) is not None:
+            mesh = data.mesh_pos, data.mesh_face
+        else:
+            mesh = None
+        if visibility == 'geometry' and mesh is None:
             raise ValueError("visibility='geometry' needs the mesh in "
-                             "'data.face'; use 'horizon' for point clouds")
+                             "'data.face' (or 'data.mesh_pos' / "
+                             "'data.mesh_face' of texels); use 'horizon' "
+                             "for point clouds")
         dtype = data.sh_in.dtype
         visible = None
-        if face is not None and visibility != 'horizon':
-            visible = direction_visibility(data.pos, data.normal, data.pos,
-                                           face)
+        if mesh is not None and visibility != 'horizon':
+            visible = direction_visibility(data.pos, data.normal, *mesh)
         grid = torch.linspace(math.sqrt(MIN_ALPHA), 1.0, roughness_cells,
                               dtype=dtype, device=data.sh_in.device)
         # single precision: the tables are Monte Carlo estimates (about 1%

@@ -1,5 +1,5 @@
 """Solvers for linear systems on surfaces, and batched Levenberg-Marquardt
-for many small independent fits."""
+for many small fits, independent or coupled by a total variation."""
 from .gravo_mg import ConvergenceWarning, GravoMG, SolveInfo
 from .levenberg_marquardt import (LMInfo, levenberg_marquardt,
                                   levenberg_marquardt_tv)

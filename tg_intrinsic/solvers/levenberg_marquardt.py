@@ -1,10 +1,11 @@
-r"""Batched Levenberg-Marquardt for many small independent problems, such
-as one SVBRDF per surface point: every row of the parameters has its own
-residuals, damping and acceptance, and all rows are solved at once as
-``[N, P, P]`` systems."""
+r"""Batched Levenberg-Marquardt for many small problems, such as one SVBRDF
+per surface point: independent rows, each with its own residuals, damping
+and acceptance, solved at once as ``[N, P, P]`` systems
+(:func:`levenberg_marquardt`); or rows coupled by a total variation over a
+graph, solved together (:func:`levenberg_marquardt_tv`)."""
 import math
 from dataclasses import dataclass, field
-from typing import Callable, List, Optional, Union
+from typing import Callable, List, Optional
 
 import torch
 import torch.autograd.forward_ad as forward_ad
@@ -34,8 +35,7 @@ def levenberg_marquardt(residual: Callable[[Tensor], Tensor], x0: Tensor,
                         lower: Optional[Tensor] = None,
                         upper: Optional[Tensor] = None, loss: str = 'l2',
                         max_iter: int = 30, tol: float = 1e-6,
-                        damping: float = 1e-3,
-                        l1_epsilon: Union[float, Tensor] = 1e-3,
+                        damping: float = 1e-3, l1_epsilon: float = 1e-3,
                         jacobian: Optional[Callable] = None,
                         max_step: Optional[float] = None) -> tuple:
     r"""Minimises, for every row :math:`n` independently,
@@ -82,11 +82,9 @@ def levenberg_marquardt(residual: Callable[[Tensor], Tensor], x0: Tensor,
             (default: :obj:`1e-6`)
         damping (float, optional): Initial :math:`\lambda`.
             (default: :obj:`1e-3`)
-        l1_epsilon (float or torch.Tensor, optional): :math:`\epsilon` of
-            the L1 weights, in the units of the residuals; a tensor
-            :math:`(R)` gives each residual its own (residuals of
-            different units). Below it the loss is quadratic, as Huber's.
-            (default: :obj:`1e-3`)
+        l1_epsilon (float, optional): :math:`\epsilon` of the L1 weights,
+            in the units of the residuals; below it the loss is quadratic,
+            as Huber's. (default: :obj:`1e-3`)
         max_step (float, optional): Longest step of any one parameter in
             one iteration (a trust region in parameter units, which keeps
             a fit near its start where the objective has several minima).
@@ -108,12 +106,7 @@ def levenberg_marquardt(residual: Callable[[Tensor], Tensor], x0: Tensor,
     max_iter = check_positive_int(max_iter, 'max_iter', minimum=0)
     tol = check_positive_float(tol, 'tol', allow_zero=True)
     damping = check_positive_float(damping, 'damping')
-    if isinstance(l1_epsilon, Tensor):
-        if l1_epsilon.dim() != 1 or not bool((l1_epsilon > 0).all()):
-            raise ValueError("'l1_epsilon' must be a positive number or a "
-                             "positive tensor [R], one per residual")
-    else:
-        l1_epsilon = check_positive_float(l1_epsilon, 'l1_epsilon')
+    l1_epsilon = check_positive_float(l1_epsilon, 'l1_epsilon')
     if max_step is not None:
         max_step = check_positive_float(max_step, 'max_step')
     num, num_params = x.shape
@@ -134,11 +127,6 @@ def levenberg_marquardt(residual: Callable[[Tensor], Tensor], x0: Tensor,
     weight = check_float_tensor(weight, 'weight', r.shape)
     if bool((weight < 0).any()):
         raise ValueError("'weight' must be non-negative")
-    if isinstance(l1_epsilon, Tensor):
-        if l1_epsilon.numel() != r.size(1):
-            raise ValueError(f"'l1_epsilon' holds {l1_epsilon.numel()} "
-                             f"values for {r.size(1)} residuals per row")
-        l1_epsilon = l1_epsilon.to(r)
 
     info = LMInfo()
     cost = _objective(weight, r, loss)
@@ -158,7 +146,7 @@ def levenberg_marquardt(residual: Callable[[Tensor], Tensor], x0: Tensor,
             jac = jacobian(xa, rows)[1].detach()
         w = weight[rows]
         if loss == 'l1':
-            w = w / torch.clamp(ra.abs(), min=l1_epsilon)
+            w = w / ra.abs().clamp_min(l1_epsilon)
         jw = jac * w.unsqueeze(-1)
         hessian = jw.transpose(1, 2) @ jac                 # (n, P, P)
         gradient = (jw * ra.unsqueeze(-1)).sum(1)          # (n, P)
@@ -248,7 +236,7 @@ def levenberg_marquardt_tv(jacobian: Callable[[Tensor], tuple], x0: Tensor,
                            upper: Optional[Tensor] = None,
                            max_iter: int = 30, tol: float = 1e-6,
                            damping: float = 1e-3,
-                           l1_epsilon: Union[float, Tensor] = 1e-3,
+                           l1_epsilon: float = 1e-3,
                            tv_epsilon: float = 1e-2,
                            max_step: Optional[float] = None,
                            cg_iter: int = 50) -> tuple:
@@ -287,8 +275,7 @@ def levenberg_marquardt_tv(jacobian: Callable[[Tensor], tuple], x0: Tensor,
             by less than :obj:`tol` times its value. (default: :obj:`1e-6`)
         damping (float, optional): Initial :math:`\lambda`.
             (default: :obj:`1e-3`)
-        l1_epsilon (float or torch.Tensor, optional): :math:`\epsilon` of
-            the residuals, or one per residual :math:`(R)`.
+        l1_epsilon (float, optional): :math:`\epsilon` of the residuals.
             (default: :obj:`1e-3`)
         tv_epsilon (float, optional): :math:`\epsilon` of the variation,
             in parameter units. (default: :obj:`1e-2`)
@@ -334,11 +321,9 @@ def levenberg_marquardt_tv(jacobian: Callable[[Tensor], tuple], x0: Tensor,
     r, jac, cost = evaluate(x)
     if not (torch.isfinite(r).all() and math.isfinite(cost)):
         raise ValueError("the residuals are NaN or infinite at 'x0'")
-    if isinstance(l1_epsilon, Tensor):
-        l1_epsilon = l1_epsilon.to(r)
     info = LMInfo(objective=[cost / num])
     for _ in range(max_iter):
-        w = weight / torch.clamp(r.abs(), min=l1_epsilon)
+        w = weight / r.abs().clamp_min(l1_epsilon)
         jw = jac * w.unsqueeze(-1)
         blocks = jw.transpose(1, 2) @ jac                  # (N, P, P)
         gradient = (jw * r.unsqueeze(-1)).sum(1)          # (N, P)

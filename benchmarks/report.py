@@ -858,6 +858,8 @@ def svbrdf_mitsuba(d, _):
     reached = [b.get(label) for b in best]
     seeded = [b[next(k for k in b if k.endswith('+ prb'))] for b in best]
     prb_best = [b['mitsuba_best'] for b in best]
+    shares = [r / b['mitsuba_seconds'] for r, b in zip(reached, best)
+              if r is not None]
     result = (
         f"Ours ({label}: the SH recovery, then "
         f"`FrequencySVBRDF.refine` against the full integral of the "
@@ -870,9 +872,8 @@ def svbrdf_mitsuba(d, _):
         f"{span([p['base_color_rmse'] for p in prb_best], f3)}, its best) "
         f"after {span([b['mitsuba_seconds'] for b in best], f1)} s and no "
         f"further in its {args['budget']:.0f} s"
-        + (f", so ours gets past prb's best in "
-           f"**{span([r / b['mitsuba_seconds'] for r, b in zip(reached, best)], pct)}"
-           f" of prb's time** (goal: at most a third)"
+        + (f", so ours gets past prb's best in **"
+           f"{span(shares, pct)} of prb's time** (goal: at most a third)"
            if all(r is not None for r in reached)
            else ", and ours does not reach it on every map")
         + "; prb started from our SH recovery (the paper's \"ours + "
@@ -965,6 +966,7 @@ def rank_correlation(x: Sequence[float], y: Sequence[float]) -> float:
 def svbrdf_merge(d, _):
     runs = d['runs']
     maps = [r['envmap'] for r in runs[0]['rows']]
+    per_point = [r['mean_per_point_spearman_across_lightings'] for r in runs]
 
     def pair(m):
         return f"{m['roughness_mae']:.3f} / {m['base_color_rmse']:.3f}"
@@ -1007,7 +1009,7 @@ def svbrdf_merge(d, _):
         f"metric/seed pairs beat the mean, {within} are within "
         f"{pct(d['tolerance'])} of the best). Why: per point, entropy "
         f"across lightings does not rank the errors (mean Spearman "
-        f"{span([r['mean_per_point_spearman_across_lightings'] for r in runs], signed, ' to ')}); "
+        f"{span(per_point, signed, ' to ')}); "
         f"the merge picks the lowest-error lighting at "
         f"{span_pct([r['merged_picks_lowest_error_lighting'] for r in runs])}"
         f" of points (chance {pct(1 / len(maps))}), most often `{most}` "
@@ -1033,8 +1035,9 @@ def svbrdf_views(d, _):
                             'mean_entropy')}
 
         def at(i):
-            return (f"{counts[i]} views: greedy {greedy[i]['roughness_mae']:.3f}"
-                    f" / {greedy[i]['base_color_rmse']:.3f} / "
+            return (f"{counts[i]} views: greedy "
+                    f"{greedy[i]['roughness_mae']:.3f} / "
+                    f"{greedy[i]['base_color_rmse']:.3f} / "
                     f"{greedy[i]['mean_entropy']:.2f}, random "
                     f"{mean[i]['roughness_mae']:.3f}+-"
                     f"{std[i]['roughness_mae']:.3f} / "

@@ -602,8 +602,9 @@ class _Problem:
         self.edges = model._graph(data, tv_k) if tv_weight > 0 \
             else None
         # the residuals' weights, one row per point, as the solvers take them
-        self.weight_rows = (self.weight.expand_as(self.target) / self.normaliser
-                            ).reshape(self.target.size(0), -1)
+        self.weight_rows = (self.weight.expand_as(self.target)
+                            / self.normaliser).reshape(self.target.size(0),
+                                                       -1)
         self.sums = None
 
     def refresh(self):

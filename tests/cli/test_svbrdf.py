@@ -135,7 +135,8 @@ def test_refinement_against_the_full_integral(scene, tmp_path):
     before = json.loads((plain / 'report.json').read_text())
     after = json.loads((refined / 'report.json').read_text())
     assert after['options']['refine'] == 5 and 'refine' in after['seconds']
-    assert 'refine' not in before['seconds']
+    assert 'refine' not in before['seconds'] and before['refine_loss'] is None
+    assert after['refine_loss'][1] < after['refine_loss'][0]
     # the example is rendered with the full integral: refining gets closer
     assert after['ground_truth']['roughness_mae'] \
         < before['ground_truth']['roughness_mae']

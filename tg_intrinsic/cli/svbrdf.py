@@ -270,6 +270,7 @@ def recover(args) -> int:
         result = model.fit(data, steps=steps, tv_weight=args.tv_weight,
                            metallic=args.metallic, solver=args.solver,
                            progress=not args.quiet)
+    fitted = result
     if args.refine:
         with stage(f'refining against the full integral ({args.refine} '
                    f'steps)', args.quiet, seconds, 'refine'):
@@ -303,8 +304,10 @@ def recover(args) -> int:
                     'refine': args.refine,
                     'device': str(device), 'dtype': args.dtype},
         'seconds': seconds,
-        'initial_loss': result.loss[0],
-        'final_loss': result.loss[-1],
+        'initial_loss': fitted.loss[0],
+        'final_loss': fitted.loss[-1],
+        'refine_loss': [result.loss[0], result.loss[-1]]
+        if args.refine else None,
         'mean_entropy': float(np.mean(maps['entropy'])),
         'ground_truth': None if truth is None else _errors(maps, truth),
         'files': sorted(os.path.basename(f) for f in files) + ['report.json'],
@@ -435,6 +438,13 @@ def _print_summary(out: str, report: dict):
         f" -> {report['final_loss']:.4g}; mean entropy "
         f"{report['mean_entropy']:.3f}",
     ]
+    if report['refine_loss'] is not None:
+        lines.append(
+            f"refinement against the full integral: "
+            f"{report['options']['refine']} steps in "
+            f"{report['seconds']['refine']:.1f} s, loss "
+            f"{report['refine_loss'][0]:.4g} -> "
+            f"{report['refine_loss'][1]:.4g}")
     truth = report['ground_truth']
     if truth is not None:
         rho = truth['entropy_roughness_error_spearman']

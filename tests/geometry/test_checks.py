@@ -259,3 +259,17 @@ def test_vector_features():
         with pytest.raises(ValueError, match=r"'v' must be float tangent "
                                              r"vector features"):
             C.check_vector_features(value, 'v', channels, num)
+
+
+def test_view_indices():
+    assert C.check_view_indices([2, 0], 'views', 3) == [2, 0]
+    assert C.check_view_indices(torch.tensor([1]), 'views', 3) == [1]
+    assert C.check_view_indices([], 'views', 3) == []
+    for views, match in [([0, 3], r'\[3\] outside \[0, 3\)'),
+                         ([1, 1], 'more than once'),
+                         ([-1], 'at least 0'),
+                         (torch.tensor([0.5]), 'integer'),
+                         (torch.tensor([True]), 'integer'),
+                         (None, 'sequence of view indices')]:
+        with pytest.raises(ValueError, match=match):
+            C.check_view_indices(views, 'views', 3)

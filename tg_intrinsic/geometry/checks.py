@@ -438,3 +438,28 @@ def check_prolongation(x: Tensor, prolong_index: Tensor,
         far = 'coarse' if side == 'fine' else 'fine'
         _check_range(prolong_index[1 if side == 'fine' else 0],
                      'prolong_index', other, f'{far} points (num_{far})')
+
+
+def check_view_indices(views, name: str, num_views: int) -> list:
+    """Distinct view indices in ``[0, num_views)`` as a list of ints (a
+    sequence or an integer tensor, possibly empty)."""
+    if isinstance(views, Tensor):
+        if views.is_floating_point() or views.dtype == torch.bool \
+                or views.dim() > 1:
+            raise ValueError(f"'{name}' must be a sequence of integer view "
+                             f"indices, got a tensor of shape "
+                             f"{list(views.shape)} and dtype {views.dtype}")
+        views = views.reshape(-1).tolist()
+    try:
+        views = [check_positive_int(v, name, minimum=0) for v in views]
+    except TypeError:
+        raise ValueError(f"'{name}' must be a sequence of view indices, got "
+                         f"{views!r}") from None
+    bad = [v for v in views if v >= num_views]
+    if bad:
+        raise ValueError(f"'{name}' holds view indices {bad[:5]} outside "
+                         f"[0, {num_views}): there are only {num_views} "
+                         f"views")
+    if len(set(views)) != len(views):
+        raise ValueError(f"'{name}' lists a view more than once: {views}")
+    return views

@@ -13,7 +13,8 @@ from tg_intrinsic.geometry.appearance.envmap import (check_envmap,
 from tg_intrinsic.geometry.appearance.view_selection import \
     select_views as greedy_views
 from tg_intrinsic.geometry.checks import (check_positive_float,
-                                          check_positive_int)
+                                          check_positive_int,
+                                          check_view_indices)
 
 from .fit_spherical_harmonics import FitSphericalHarmonics
 
@@ -51,20 +52,10 @@ def keep_views(data: Data, views) -> Data:
         raise ValueError(f"data already holds {stale}, computed from all "
                          f"views; select views before FitSphericalHarmonics")
     total = mask.size(1)
-    index = torch.as_tensor(views).reshape(-1)
+    index = torch.tensor(check_view_indices(views, 'views', total),
+                         dtype=torch.long)
     if index.numel() == 0:
         raise ValueError("'views' must hold at least one view")
-    if index.is_floating_point() or index.dtype == torch.bool:
-        raise ValueError(f"'views' must be integer view indices, got "
-                         f"{index.dtype}")
-    index = index.long()
-    if int(index.min()) < 0 or int(index.max()) >= total:
-        raise ValueError(f"'views' holds indices in [{int(index.min())}, "
-                         f"{int(index.max())}], outside [0, {total}): there "
-                         f"are only {total} views")
-    if index.unique().numel() != index.numel():
-        raise ValueError(f"'views' lists a view more than once: "
-                         f"{index.tolist()}")
     out = data.clone()
     if getattr(out, 'view_index', None) is None:
         out.view_index = torch.arange(total, device=mask.device)

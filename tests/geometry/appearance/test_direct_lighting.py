@@ -8,7 +8,7 @@ import torch
 
 from tg_intrinsic.geometry.appearance.brdf import ggx_albedo
 from tg_intrinsic.geometry.appearance.direct_lighting import (
-    direction_visibility, reflection_tables, normal_frames)
+    direction_visibility, reflection_tables)
 from tg_intrinsic.geometry.appearance.envmap import (equirect_directions,
                                                      irradiance)
 from tg_intrinsic.geometry.appearance.lighting import render_radiance
@@ -25,18 +25,6 @@ def random_pairs(num=60, views=4, seed=0):
     # no grazing views: both estimators are noisiest there
     view = unit(view + 0.3 * normal[:, None])
     return normal, view, torch.ones(num, views, dtype=torch.bool)
-
-
-def test_frames_are_orthonormal_with_the_normal_last():
-    normal, _, _ = random_pairs(200)
-    normal = torch.cat([normal, torch.tensor([[0, 0, 1.0], [0, 0, -1.0]],
-                                             dtype=D64)])
-    frames = normal_frames(normal)
-    eye = torch.eye(3, dtype=D64).expand(len(normal), 3, 3)
-    assert torch.allclose(frames @ frames.transpose(1, 2), eye, atol=1e-12)
-    assert torch.allclose(frames[:, 2], normal)
-    assert torch.allclose(torch.linalg.det(frames), torch.ones(len(normal),
-                                                                dtype=D64))
 
 
 def test_tables_match_the_independent_renderer():

@@ -39,6 +39,7 @@ from torch import Tensor
 
 from ..checks import (check_points, check_positive_int, check_seed,
                       check_tensor)
+from ..pointcloud.frames import tangent_frames
 from .brdf import model_alpha
 from .cameras import look_at_cameras
 from .envmap import (check_envmap, direction_to_equirect, equirect_directions,
@@ -46,19 +47,7 @@ from .envmap import (check_envmap, direction_to_equirect, equirect_directions,
 from .raster import point_visibility
 from .sh import smith_g1
 
-__all__ = ['reflection_tables', 'direction_visibility', 'normal_frames']
-
-
-def normal_frames(normal: Tensor) -> Tensor:
-    r"""Orthonormal frames :math:`(N, 3, 3)` with rows :math:`(t, b, n)`
-    (Duff et al. 2017: continuous except at :math:`n_z = 0^-`)."""
-    x, y, z = normal.unbind(-1)
-    sign = torch.where(z >= 0, torch.ones_like(z), -torch.ones_like(z))
-    a = -1.0 / (sign + z)
-    b = x * y * a
-    t = torch.stack([1 + sign * x * x * a, sign * b, -sign * x], -1)
-    bt = torch.stack([b, sign + y * y * a, -y], -1)
-    return torch.stack([t, bt, normal], -2)
+__all__ = ['reflection_tables', 'direction_visibility']
 
 
 def direction_visibility(points: Tensor, normal: Tensor, vertices: Tensor,
@@ -130,6 +119,8 @@ class _Environment:
         self.probability = weight / weight.sum()
         self.cdf = torch.cumsum(self.probability, 0)
         self.cdf[-1] = 1.0
+        # density per solid angle, uniform inside each pixel
+        self.pixel_density = self.probability / self.solid_angle.flatten()
 
     def coordinates(self, directions: Tensor):
         """Continuous pixel coordinates ``(row, col)`` of ``directions``."""
@@ -140,7 +131,7 @@ class _Environment:
         coordinates ``(row, col)``."""
         index = row.long().clamp(0, self.height - 1) * self.width \
             + col.long().clamp(0, self.width - 1)
-        return self.probability[index] / self.solid_angle.flatten()[index]
+        return self.pixel_density[index]
 
     def sample(self, u0: Tensor, u1: Tensor, u2: Tensor):
         """Directions from three uniform numbers: a pixel by the CDF, then
@@ -155,8 +146,7 @@ class _Environment:
         radius = (1 - z * z).clamp_min(0).sqrt()
         directions = torch.stack([radius * torch.cos(phi),
                                   radius * torch.sin(phi), z], -1)
-        density = self.probability[index] / self.solid_angle.flatten()[index]
-        return directions, density
+        return directions, self.pixel_density[index]
 
 
 def _ggx(cos_h: Tensor, alpha: Tensor) -> Tensor:
@@ -284,7 +274,7 @@ def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
                     0, 2 * grid_rows - 1)
         return visibility[points.view(-1, *([1] * (cell.dim() - 1))), cell]
 
-    frames = normal_frames(normal)
+    frames = tangent_frames(normal)
     irradiance = _irradiance(normal, environment, visible)
     alpha = model_alpha(roughness).view(1, -1, 1)
 

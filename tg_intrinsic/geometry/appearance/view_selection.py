@@ -13,33 +13,10 @@ import torch
 from torch import Tensor
 
 from ..checks import (check_float_tensor, check_positive_float,
-                      check_positive_int, check_tensor)
+                      check_positive_int, check_tensor, check_view_indices)
 from .brdf import (lobe_degree_sums, lobe_filter, model_alpha,
                    observed_spectra, spectral_uncertainty)
 from .sh import num_coefficients, real_sh
-
-
-def _view_list(views, name: str, num_views: int) -> list:
-    """Distinct view indices in ``[0, num_views)`` as a list of ints."""
-    if isinstance(views, Tensor):
-        if views.is_floating_point() or views.dim() > 1:
-            raise ValueError(f"'{name}' must be a sequence of integer view "
-                             f"indices, got a tensor of shape "
-                             f"{list(views.shape)} and dtype {views.dtype}")
-        views = views.reshape(-1).tolist()
-    try:
-        views = [check_positive_int(v, name, minimum=0) for v in views]
-    except TypeError:
-        raise ValueError(f"'{name}' must be a sequence of view indices, got "
-                         f"{views!r}") from None
-    bad = [v for v in views if v >= num_views]
-    if bad:
-        raise ValueError(f"'{name}' holds view indices {bad[:5]} outside "
-                         f"[0, {num_views}): there are only {num_views} "
-                         f"views")
-    if len(set(views)) != len(views):
-        raise ValueError(f"'{name}' lists a view more than once: {views}")
-    return views
 
 
 class _Estimate:
@@ -259,13 +236,13 @@ def select_views(mirror_dir: Tensor, weight: Tensor, light: Tensor,
                          f"got {sh_in.size(1)}")
     irradiance = check_float_tensor(irradiance, 'irradiance', (num, 3))
     num_views = check_positive_int(num_views, 'num_views')
-    seed = _view_list(seed_views, 'seed_views', total)
+    seed = check_view_indices(seed_views, 'seed_views', total)
     if not seed:
         raise ValueError("'seed_views' must hold at least one view: the "
                          "first estimate needs observations")
     if candidates is None:
         candidates = [v for v in range(total) if v not in seed]
-    candidates = _view_list(candidates, 'candidates', total)
+    candidates = check_view_indices(candidates, 'candidates', total)
     overlap = sorted(set(seed) & set(candidates))
     if overlap:
         raise ValueError(f"views {overlap} are both seed views and "

@@ -132,6 +132,36 @@ def test_preconditioned_conjugate_gradients():
     assert counts['gravo'] * 5 < counts['plain']
 
 
+def test_pcg_method_matches_direct_solves_in_fewer_iterations():
+    A, m, solver = case('boundary')
+    rng = np.random.default_rng(5)
+    B = m[:, None] * rng.normal(size=(A.shape[0], 3))
+    X = solver.solve(A, B, tol=1e-10, max_iter=200, method='pcg')
+    info = solver.info
+    assert info.converged and info.residuals[-1] < 1e-10
+    for k in range(3):
+        assert relative_residual(A, X[:, k], B[:, k]) < 1e-10
+        exact = spsolve(A.tocsc(), B[:, k])
+        assert np.linalg.norm(X[:, k] - exact) < 1e-8 * np.linalg.norm(exact)
+    # each column has its own step lengths: solved alone, it is the same
+    alone = solver.solve(A, B[:, 1], tol=1e-10, max_iter=200, method='pcg')
+    assert np.linalg.norm(alone - X[:, 1]) < 1e-8 * np.linalg.norm(alone)
+    pcg_iterations = info.iterations
+    solver.solve(A, B, tol=1e-10, max_iter=200)
+    assert solver.info.converged
+    assert pcg_iterations < solver.info.iterations
+    # a zero column stays zero and does not stall the others
+    B[:, 2] = 0
+    X = solver.solve(A, B, tol=1e-10, max_iter=200, method='pcg')
+    assert solver.info.converged and not X[:, 2].any()
+    with pytest.warns(ConvergenceWarning, match='max_iter=2 PCG iterations'):
+        solver.solve(A, B, tol=1e-14, max_iter=2, method='pcg')
+    with pytest.raises(ValueError, match="method='pcg' runs on the CPU"):
+        solver.solve(A, torch.from_numpy(B), method='pcg')
+    with pytest.raises(ValueError, match='method'):
+        solver.solve(A, B, method='gmres')
+
+
 def test_from_transform_and_direct_fallback():
     pos, face = sphere(4)
     # from_mesh builds the same levels as the transform

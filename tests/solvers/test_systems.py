@@ -1,5 +1,7 @@
 """smooth / poisson against scipy's direct solves, on a mesh (cotan), a
-non-manifold mesh and a point cloud (robust Laplacian); bad input."""
+non-manifold mesh and a point cloud (robust Laplacian); the conformal flow
+against the recurrence solved directly and against its analytic limits (a
+sphere stays one, an ellipsoid becomes one); bad input."""
 import re
 
 import numpy as np
@@ -9,8 +11,9 @@ import torch
 from scipy.sparse.linalg import spsolve
 from torch_geometric.data import Data
 
-from tg_intrinsic.solvers import (ConvergenceWarning, GravoMG, poisson, smooth,
-                                  stiffness_and_mass)
+from tg_intrinsic.geometry import lumped_mass
+from tg_intrinsic.solvers import (ConvergenceWarning, GravoMG, conformal_flow,
+                                  poisson, smooth, stiffness_and_mass)
 
 from tests.conftest import icosphere
 
@@ -184,3 +187,86 @@ def test_extreme_scales_with_scaled_weights(scale):
         with pytest.raises(ValueError,
                            match=re.escape(f'use about {suggestion} ')):
             poisson(scaled, 1.0)
+
+
+def test_pcg_smoothing_matches_a_direct_solve():
+    data = small_data(4)
+    S, m = stiffness_and_mass(data)
+    alpha, beta = 1e-3, 1e-5
+    exact = direct(sp.diags(m) + alpha * S + beta * S @ sp.diags(1 / m) @ S,
+                   m, data.x)
+    solver = GravoMG.from_points(data.pos, data.face.t().reshape(-1, 2).t(),
+                                 lower_bound=50)
+    for method in ('cycles', 'pcg'):
+        out = smooth(data, alpha, beta=beta, solver=solver, method=method)
+        assert solver.info.converged and solver.info.direct is None
+        assert np.abs(out.numpy() - exact).max() < 1e-6 * np.abs(exact).max()
+
+
+def ellipsoid(subdivisions=3, axes=(1.0, 0.6, 0.3)):
+    pos, face = icosphere(subdivisions)
+    return Data(pos=pos * torch.tensor(axes, dtype=pos.dtype), face=face)
+
+
+def roundness(pos):
+    """Spread of the distances to the centroid, relative to their mean."""
+    r = (pos - pos.mean(0)).norm(dim=1)
+    return float(r.std() / r.mean())
+
+
+def test_conformal_flow_is_the_recurrence_solved_directly():
+    data = ellipsoid()
+    S, m = stiffness_and_mass(data)
+    area, p = m.sum(), data.pos.numpy()
+    centroid = m @ p / area
+    infos = []
+    flow = conformal_flow(data, step=0.05, steps=4, lower_bound=50,
+                          callback=lambda t, info: infos.append((t, info)))
+    assert flow.shape == (5, ) + tuple(data.pos.shape)
+    assert flow.dtype == data.pos.dtype
+    assert torch.equal(flow[0], data.pos)
+    # the oracle: each step a direct solve of (M_t + h S_0) p = M_t p_t,
+    # then the centroid put back and the area rescaled
+    for t in range(1, 5):
+        p = np.stack([spsolve((sp.diags(m) + 0.05 * S).tocsc(), m * c)
+                      for c in p.T], 1)
+        m = lumped_mass(torch.from_numpy(p), data.face).numpy()
+        scale = np.sqrt(area / m.sum())
+        p = (p - m @ p / m.sum()) * scale + centroid
+        m = m * scale ** 2
+        assert np.abs(flow[t].numpy() - p).max() < 1e-6
+    assert [t for t, _ in infos] == [1, 2, 3, 4]
+    assert all(info.converged and info.direct is None for _, info in infos)
+
+
+def test_conformal_flow_rounds_an_ellipsoid_and_keeps_a_sphere():
+    data = ellipsoid()
+    flow = conformal_flow(data, step=0.2, steps=12, lower_bound=50)
+    assert roundness(data.pos) > 0.2 and roundness(flow[-1]) < 0.02
+    area = lumped_mass(data.pos, data.face).sum()
+    for p in flow:
+        assert abs(float(lumped_mass(p, data.face).sum() / area) - 1) < 1e-9
+    # without the normalisation the surface shrinks
+    shrunk = conformal_flow(data, step=0.2, steps=2, normalize=False,
+                            lower_bound=50)
+    assert lumped_mass(shrunk[-1], data.face).sum() < 0.9 * area
+    # a round sphere is a fixed point (up to its discretisation)
+    pos, face = icosphere(3)
+    flow = conformal_flow(Data(pos=pos, face=face), step=0.2, steps=3,
+                          lower_bound=50)
+    # (the vertices slide along it a little, by 2e-3 of its radius)
+    assert roundness(flow[-1]) < 1e-3
+    assert (flow[-1] - pos).norm(dim=1).max() < 5e-3
+
+
+def test_conformal_flow_bad_input():
+    data = ellipsoid(2)
+    with pytest.raises(ValueError, match="needs a triangle mesh"):
+        conformal_flow(Data(pos=data.pos), step=0.1)
+    for step in (0, -1.0, float('nan'), True):
+        with pytest.raises(ValueError, match="'step' must be a positive"):
+            conformal_flow(data, step=step)
+    with pytest.raises(ValueError, match='steps'):
+        conformal_flow(data, step=0.1, steps=0)
+    with pytest.raises(ValueError, match="'step' depends on the scale"):
+        conformal_flow(Data(pos=data.pos * 1e-8, face=data.face), step=0.1)

@@ -21,6 +21,7 @@ from tg_intrinsic.solvers._torch_levels import TorchLevels
 
 CYCLES = ('V', 'W', 'F')
 CRITERIA = ('relative', 'mass')
+METHODS = ('cycles', 'pcg')
 
 
 class ConvergenceWarning(UserWarning):
@@ -72,6 +73,39 @@ class _Levels:
                            diag_pivot_thresh=0.0,
                            options={'SymmetricMode': True})
         self.torch: Dict[tuple, TorchLevels] = {}
+
+
+class _ConjugateGradients:
+    """Preconditioned conjugate gradients on the columns of B at once
+    (each column has its own step lengths), one :meth:`step` at a time."""
+
+    def __init__(self, A: sp.csr_matrix, B: np.ndarray, X: np.ndarray,
+                 precondition):
+        self.A, self.precondition = A, precondition
+        self.R = B - self._apply(X)
+        self.Z = precondition(self.R)
+        self.P = self.Z.copy()
+        self.rz = (self.R * self.Z).sum(0)
+
+    def _apply(self, X: np.ndarray) -> np.ndarray:
+        return np.stack([matvec(self.A, np.ascontiguousarray(X[:, k]))
+                         for k in range(X.shape[1])], 1)
+
+    def step(self, X: np.ndarray) -> np.ndarray:
+        AP = self._apply(self.P)
+        curvature = (self.P * AP).sum(0)
+        # A column that is already solved exactly has P = 0: it stays.
+        alpha = np.divide(self.rz, curvature, out=np.zeros_like(self.rz),
+                          where=curvature > 0)
+        X += alpha * self.P
+        self.R -= alpha * AP
+        self.Z = self.precondition(self.R)
+        rz = (self.R * self.Z).sum(0)
+        beta = np.divide(rz, self.rz, out=np.zeros_like(rz),
+                         where=self.rz > 0)
+        self.P = self.Z + beta * self.P
+        self.rz = rz
+        return X
 
 
 class GravoMG:
@@ -259,7 +293,8 @@ class GravoMG:
 
     def solve(self, A, b, x0=None, tol: float = 1e-4, max_iter: int = 100,
               criterion: str = 'relative', mass=None, pre: int = 2,
-              post: int = 2, cycle: str = 'V', strict: bool = False):
+              post: int = 2, cycle: str = 'V', strict: bool = False,
+              method: str = 'cycles'):
         r"""Cycles until the residual :math:`r = b - A x` is small:
         ``'relative'``: :math:`\|r\| / \|b\|`, ``'mass'``:
         :math:`\|r\|_{M^{-1}} / \|b\|_{M^{-1}}` with the lumped masses
@@ -286,6 +321,7 @@ class GravoMG:
         raises a :class:`RuntimeError` with :obj:`strict=True`."""
         check_choice(cycle, 'cycle', CYCLES)
         check_choice(criterion, 'criterion', CRITERIA)
+        check_choice(method, 'method', METHODS)
         tol = check_positive_float(tol, 'tol')
         max_iter = check_positive_int(max_iter, 'max_iter')
         pre = check_positive_int(pre, 'pre', minimum=0)
@@ -296,6 +332,10 @@ class GravoMG:
         levels = self.setup(A)
         n = levels.A[0].shape[0]
         use_torch = isinstance(b, torch.Tensor)
+        if use_torch and method == 'pcg':
+            raise ValueError("method='pcg' runs on the CPU with numpy "
+                             "arrays; pass b as a numpy array, or use "
+                             "method='cycles' for the torch backend")
         if use_torch:
             if b.dtype not in (torch.float32, torch.float64):
                 raise ValueError(f"'b' must be float32 or float64, got "
@@ -363,6 +403,8 @@ class GravoMG:
                 np.array(x0, dtype=np.float64).reshape(n, -1)
 
             def step(X):
+                if method == 'pcg':
+                    return pcg.step(X)
                 for k in range(X.shape[1]):  # columns: a few at most
                     X[:, k] = self._cycle(levels, 0, B[:, k],
                                           np.ascontiguousarray(X[:, k]),
@@ -377,6 +419,12 @@ class GravoMG:
                     return (B[:, 0] - matvec(A0, X[:, 0]))[:, None]
                 return np.stack([B[:, k] - matvec(A0, X[:, k])
                                  for k in range(X.shape[1])], 1)
+            if method == 'pcg':
+                pcg = _ConjugateGradients(
+                    A0, B, X, lambda R: np.stack([self._cycle(
+                        levels, 0, np.ascontiguousarray(R[:, k]),
+                        np.zeros(n), cycle, pre, post, 'backward')
+                        for k in range(R.shape[1])], 1))
         b_norm = norms(B)
         b_norm[b_norm == 0] = 1.0  # a zero column stays zero
         for _ in range(max_iter):
@@ -389,7 +437,8 @@ class GravoMG:
                 raise RuntimeError(
                     f"the cycles diverge (relative residual "
                     f"{info.residuals[-1]:.3g} after {info.iterations} "
-                    f"cycles, {info.residuals[0]:.3g} after the first). "
+                    f"iterations, {info.residuals[0]:.3g} after the "
+                    f"first). "
                     f"In float32 this happens for nearly singular systems "
                     f"such as S + 1e-6 M, whose rounding errors the coarse "
                     f"solve amplifies; solve in float64")
@@ -398,11 +447,13 @@ class GravoMG:
                 break
         info.solve_time = time.perf_counter() - start
         if not info.converged:
-            info.reason = (f"stopped at max_iter={max_iter} cycles with "
-                           f"{criterion} residual {info.residuals[-1]:.3g} "
-                           f"above tol={tol:g}; raise max_iter, or use the "
-                           f"hierarchy as a preconditioner for conjugate "
-                           f"gradients (as_preconditioner)")
+            unit = 'cycles' if method == 'cycles' else 'PCG iterations'
+            info.reason = (f"stopped at max_iter={max_iter} {unit} "
+                           f"with {criterion} residual "
+                           f"{info.residuals[-1]:.3g} above tol={tol:g}; "
+                           f"raise max_iter" + (
+                               ", or use method='pcg'"
+                               if method == 'cycles' else ''))
             if strict:
                 raise RuntimeError(f"GravoMG.solve did not converge: "
                                    f"{info.reason}")

@@ -1,7 +1,8 @@
 r"""Laplace-type systems on the surface of a :class:`~torch_geometric.data.
 Data` and their solution with :class:`GravoMG`: stiffness and mass
 matrices, smoothing :math:`(M + \alpha S + \beta S M^{-1} S) x = M y` and
-the screened Poisson problem :math:`(S + \eta M) x = M y`."""
+the screened Poisson problem :math:`(S + \eta M) x = M y`, and the
+conformalized mean curvature flow, whose matrix changes every step."""
 import math
 import numbers
 from typing import Optional, Tuple
@@ -10,9 +11,10 @@ import numpy as np
 import scipy.sparse as sp
 import torch
 from torch import Tensor
+from torch_geometric.data import Data
 
 from tg_intrinsic.geometry import cotan_laplacian, lumped_mass, to_scipy
-from tg_intrinsic.geometry.checks import check_points
+from tg_intrinsic.geometry.checks import check_points, check_positive_int
 from tg_intrinsic.geometry.mesh import edge_face_counts
 from tg_intrinsic.solvers.gravo_mg import GravoMG
 from tg_intrinsic.surface_attributes import surface_graph
@@ -58,8 +60,17 @@ def stiffness_and_mass(data, robust: Optional[bool] = None
     return sp.csr_matrix(S), M.diagonal()
 
 
+def _default_solver(data, ratio: float, lower_bound: int) -> GravoMG:
+    """The levels of ``data`` (GravoHierarchy) if present, else a
+    hierarchy on its surface graph."""
+    if 'prolong_index_1' in data:
+        return GravoMG.from_data(data)
+    return GravoMG.from_points(data.pos, surface_graph(data), ratio=ratio,
+                               lower_bound=lower_bound)
+
+
 def _solve(data, matrix, mass, y, solver, tol, ratio, lower_bound, cycle,
-           max_iter):
+           max_iter, method):
     y = data.x if y is None else y
     if y is None:
         raise ValueError("nothing to solve for: pass y or set data.x")
@@ -72,14 +83,12 @@ def _solve(data, matrix, mass, y, solver, tol, ratio, lower_bound, cycle,
     if not np.isfinite(values).all():
         raise ValueError("'y' holds NaN or infinite values")
     if solver is None:
-        solver = (GravoMG.from_data(data) if 'prolong_index_1' in data
-                  else GravoMG.from_points(data.pos, surface_graph(data),
-                                           ratio=ratio,
-                                           lower_bound=lower_bound))
+        solver = _default_solver(data, ratio, lower_bound)
     # All channels at once: one block solve, so solver.info describes it.
     # Not converging warns there (ConvergenceWarning).
     rhs = mass[:, None] * values.reshape(mass.size, -1)
-    out = solver.solve(matrix, rhs, tol=tol, cycle=cycle, max_iter=max_iter)
+    out = solver.solve(matrix, rhs, tol=tol, cycle=cycle, max_iter=max_iter,
+                       method=method)
     return torch.from_numpy(out.reshape(values.shape)).to(y.dtype).to(
         y.device)
 
@@ -117,7 +126,7 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
            solver: Optional[GravoMG] = None, tol: float = 1e-8,
            robust: Optional[bool] = None, beta: float = 0.0,
            ratio: float = 8.0, lower_bound: int = 1000, cycle: str = 'V',
-           max_iter: int = 100) -> Tensor:
+           max_iter: int = 100, method: str = 'cycles') -> Tensor:
     r"""Implicit smoothing of the signal :math:`y` (default ``data.x``,
     :math:`(N)` or :math:`(N, C)`) with Laplacian and, for
     :math:`\beta > 0`, bi-Laplacian terms:
@@ -159,7 +168,12 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
             (default: :obj:`1000`)
         cycle (str, optional): ``'V'``, ``'W'`` or ``'F'``.
             (default: :obj:`'V'`)
-        max_iter (int, optional): Most cycles. (default: :obj:`100`)
+        max_iter (int, optional): Most cycles (or iterations).
+            (default: :obj:`100`)
+        method (str, optional): ``'cycles'``, or ``'pcg'`` for conjugate
+            gradients preconditioned by one cycle per iteration (fewer
+            iterations for the bi-Laplacian; CPU only), see
+            :meth:`GravoMG.solve`. (default: :obj:`'cycles'`)
 
     Shapes:
         - **input:** ``y`` :math:`(N)` or :math:`(N, C)`
@@ -181,14 +195,14 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
         A = A + beta * (S @ sp.diags(1.0 / m) @ S)
         A = 0.5 * (A + A.T)  # exactly symmetric despite rounding
     return _solve(data, A.tocsr(), m, y, solver, tol, ratio, lower_bound,
-                  cycle, max_iter)
+                  cycle, max_iter, method)
 
 
 def poisson(data, eta: float, y: Optional[Tensor] = None,
             solver: Optional[GravoMG] = None, tol: float = 1e-8,
             robust: Optional[bool] = None, ratio: float = 8.0,
             lower_bound: int = 1000, cycle: str = 'V',
-            max_iter: int = 100) -> Tensor:
+            max_iter: int = 100, method: str = 'cycles') -> Tensor:
     r"""The screened Poisson problem with right-hand side :math:`y`
     (default ``data.x``, :math:`(N)` or :math:`(N, C)`):
 
@@ -198,7 +212,7 @@ def poisson(data, eta: float, y: Optional[Tensor] = None,
     with :math:`\eta > 0` (without it :math:`S` is singular), solved as
     one block as in :func:`smooth`, whose arguments :obj:`solver`,
     :obj:`tol`, :obj:`robust`, :obj:`ratio`, :obj:`lower_bound`,
-    :obj:`cycle` and :obj:`max_iter` mean the same here.
+    :obj:`cycle`, :obj:`max_iter` and :obj:`method` mean the same here.
 
     Args:
         data (Data): As in :func:`smooth`.
@@ -218,4 +232,108 @@ def poisson(data, eta: float, y: Optional[Tensor] = None,
     if (m > 0).all():
         _check_scale(S, m, eta, 1.0, 'eta', eta / m.sum())
     return _solve(data, (S + eta * sp.diags(m)).tocsr(), m, y, solver, tol,
-                  ratio, lower_bound, cycle, max_iter)
+                  ratio, lower_bound, cycle, max_iter, method)
+
+
+def _flow_masses(data, robust: bool) -> np.ndarray:
+    """Lumped masses of the current positions, from the same Laplacian
+    family as the flow's stiffness matrix."""
+    if robust:
+        return stiffness_and_mass(data, robust=True)[1]
+    return lumped_mass(data.pos, data.face.cpu()).numpy()
+
+
+def conformal_flow(data, step: float, steps: int = 10,
+                   solver: Optional[GravoMG] = None, tol: float = 1e-8,
+                   robust: Optional[bool] = None, normalize: bool = True,
+                   ratio: float = 8.0, lower_bound: int = 1000,
+                   cycle: str = 'V', max_iter: int = 100,
+                   method: str = 'pcg', callback=None) -> Tensor:
+    r"""Conformalized mean curvature flow of a mesh (Kazhdan, Solomon and
+    Ben-Chen, 2012) by implicit steps: the stiffness matrix :math:`S_0` of
+    the initial surface is kept and only the masses :math:`M_t` follow the
+    flow, so the flow stays regular where mean curvature flow pinches,
+
+    .. math::
+        (M_t + h\, S_0)\, p_{t+1} = M_t\, p_t .
+
+    The matrix changes every step, so a direct solver must factorise it
+    again each time; Gravo MG keeps its hierarchy (built once, on the
+    initial surface) and only redoes the Galerkin products. With
+    :obj:`normalize` each step is followed by moving the area-weighted
+    centroid back to where it was and rescaling to the initial area (as
+    the paper does; without it the surface shrinks to a point). A genus-0
+    surface flows towards a round sphere; a round sphere stays one.
+
+    Args:
+        data (Data): ``pos`` :math:`(N, 3)` and ``face`` :math:`(3, F)` of
+            a triangle mesh, optionally a hierarchy (GravoHierarchy).
+        step (float): Time step :math:`h > 0`, in units of area (scale it
+            with the surface).
+        steps (int, optional): Number of steps. (default: :obj:`10`)
+        solver (GravoMG, optional): A solver on the points of ``data``.
+        tol (float, optional): Relative residual of every step.
+            (default: :obj:`1e-8`)
+        robust (bool, optional): Force (or forbid) the robust Laplacian;
+            default: :func:`uses_robust_laplacian`.
+        normalize (bool, optional): Keep the centroid and the area.
+            (default: :obj:`True`)
+        ratio (float, optional): Hierarchy reduction per level, when it is
+            built here. (default: :obj:`8.0`)
+        lower_bound (int, optional): Smallest hierarchy level, when it is
+            built here. (default: :obj:`1000`)
+        cycle (str, optional): ``'V'``, ``'W'`` or ``'F'``.
+            (default: :obj:`'V'`)
+        max_iter (int, optional): Most iterations per step.
+            (default: :obj:`100`)
+        method (str, optional): ``'pcg'`` or ``'cycles'``, see
+            :meth:`GravoMG.solve`. (default: :obj:`'pcg'`)
+        callback (callable, optional): Called after every step with the
+            step number (from 1) and the solver's :class:`SolveInfo`.
+
+    Shapes:
+        - **input:** ``data.pos`` :math:`(N, 3)`, ``data.face``
+          :math:`(3, F)`
+        - **output:** positions after every step, the initial ones first,
+          :math:`(\text{steps} + 1, N, 3)`, dtype and device of ``pos``
+    """
+    if getattr(data, 'face', None) is None:
+        raise ValueError("conformal_flow needs a triangle mesh: 'data' has "
+                         "no 'face' (the flow moves a surface's vertices by "
+                         "its mean curvature; a point cloud has none)")
+    if isinstance(step, bool) or not isinstance(step, numbers.Real) or \
+            not math.isfinite(step) or not step > 0:
+        raise ValueError(f"'step' must be a positive time step, got "
+                         f"{step!r}")
+    steps = check_positive_int(steps, 'steps')
+    pos = check_points(data.pos)
+    robust = uses_robust_laplacian(data, robust)
+    S, m = stiffness_and_mass(data, robust)
+    _check_scale(S, m, 1.0, step, 'step', step * m.sum())
+    if solver is None:
+        solver = _default_solver(data, ratio, lower_bound)
+    face = data.face.cpu()
+    current = pos.detach().double().cpu().numpy()
+    area = m.sum()
+    centroid = m @ current / area
+    out = [current]
+    for t in range(1, steps + 1):
+        if not (m > 0).all():
+            raise ValueError(
+                f"after {t - 1} steps {int((m <= 0).sum())} vertices have "
+                f"no area (the flow collapsed triangles); take a smaller "
+                f"'step' or fewer steps")
+        A = (sp.diags(m) + step * S).tocsr()
+        current = solver.solve(A, m[:, None] * current, x0=current, tol=tol,
+                               cycle=cycle, max_iter=max_iter,
+                               method=method)
+        flowed = Data(pos=torch.from_numpy(current), face=face)
+        m = _flow_masses(flowed, robust)
+        if normalize:
+            scale = math.sqrt(area / m.sum())
+            current = (current - m @ current / m.sum()) * scale + centroid
+            m = m * scale ** 2
+        out.append(current)
+        if callback is not None:
+            callback(t, solver.info)
+    return torch.from_numpy(np.stack(out)).to(pos.dtype).to(pos.device)

@@ -203,6 +203,30 @@ def test_pcg_smoothing_matches_a_direct_solve():
         assert np.abs(out.numpy() - exact).max() < 1e-6 * np.abs(exact).max()
 
 
+def test_split_bilaplacian_smoothing_is_the_full_solve():
+    data = small_data(4)
+    S, m = stiffness_and_mass(data)
+    alpha, beta = 3e-3, 1e-6  # alpha^2 >= 4 beta: real factors
+    exact = direct(sp.diags(m) + alpha * S + beta * S @ sp.diags(1 / m) @ S,
+                   m, data.x)
+    solver = GravoMG.from_points(data.pos, data.face.t().reshape(-1, 2).t(),
+                                 lower_bound=50)
+    runs = {}
+    for split in (None, True, False):
+        out = smooth(data, alpha, beta=beta, solver=solver, split=split)
+        assert np.abs(out.numpy() - exact).max() < 1e-6 * np.abs(exact).max()
+        runs[split] = solver.info
+    # the default splits: two Laplace-type solves whose counts add up
+    assert runs[None].iterations == runs[True].iterations
+    info = runs[True]
+    assert info.converged and len(info.residuals) == info.iterations
+    # two solves, each down to tol from a residual of 1
+    assert sum(r < 1e-8 for r in info.residuals) == 2
+    assert all(a < b for a, b in zip(info.times, info.times[1:]))
+    with pytest.raises(ValueError, match=r'split=True needs alpha\^2'):
+        smooth(data, 1e-3, beta=1e-6, solver=solver, split=True)
+
+
 def ellipsoid(subdivisions=3, axes=(1.0, 0.6, 0.3)):
     pos, face = icosphere(subdivisions)
     return Data(pos=pos * torch.tensor(axes, dtype=pos.dtype), face=face)

@@ -16,7 +16,7 @@ from torch_geometric.data import Data
 from tg_intrinsic.geometry import cotan_laplacian, lumped_mass, to_scipy
 from tg_intrinsic.geometry.checks import check_points, check_positive_int
 from tg_intrinsic.geometry.mesh import edge_face_counts
-from tg_intrinsic.solvers.gravo_mg import GravoMG
+from tg_intrinsic.solvers.gravo_mg import GravoMG, SolveInfo
 from tg_intrinsic.surface_attributes import surface_graph
 
 
@@ -126,7 +126,8 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
            solver: Optional[GravoMG] = None, tol: float = 1e-8,
            robust: Optional[bool] = None, beta: float = 0.0,
            ratio: float = 8.0, lower_bound: int = 1000, cycle: str = 'V',
-           max_iter: int = 100, method: str = 'cycles') -> Tensor:
+           max_iter: int = 100, method: str = 'cycles',
+           split: Optional[bool] = None) -> Tensor:
     r"""Implicit smoothing of the signal :math:`y` (default ``data.x``,
     :math:`(N)` or :math:`(N, C)`) with Laplacian and, for
     :math:`\beta > 0`, bi-Laplacian terms:
@@ -139,7 +140,17 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
     :math:`\beta = 0` (implicit fairing when :math:`y` is ``data.pos``);
     the bi-Laplacian term damps high frequencies like
     :math:`\beta \lambda^2` instead of :math:`\alpha \lambda`, keeping more
-    of the low ones. All :math:`C` channels are solved as one block with
+    of the low ones. When :math:`\alpha^2 \geq 4 \beta` the matrix factors
+    exactly into two Laplace-type matrices,
+
+    .. math::
+        M + \alpha S + \beta S M^{-1} S = (M + a S)\, M^{-1} (M + b S),
+        \quad a, b = \tfrac{1}{2}\big(\alpha \pm
+        \sqrt{\alpha^2 - 4 \beta}\big),
+
+    and :obj:`split` solves the two in turn, each with the sparsity and
+    the fast multigrid convergence of the Laplacian, instead of the
+    bi-Laplacian's wider stencil. All :math:`C` channels are solved as one block with
     Gravo MG on the hierarchy of ``data`` (the levels of
     :class:`~tg_intrinsic.transforms.GravoHierarchy` if present, else built
     on :func:`~tg_intrinsic.surface_attributes.surface_graph` with
@@ -174,6 +185,10 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
             gradients preconditioned by one cycle per iteration (fewer
             iterations for the bi-Laplacian; CPU only), see
             :meth:`GravoMG.solve`. (default: :obj:`'cycles'`)
+        split (bool, optional): Solve the bi-Laplacian system as two
+            Laplace-type solves (each to :obj:`tol`; :attr:`GravoMG.info`
+            then sums both); needs :math:`\alpha^2 \geq 4 \beta`. Default:
+            whenever that holds.
 
     Shapes:
         - **input:** ``y`` :math:`(N)` or :math:`(N, C)`
@@ -190,12 +205,49 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
                          f"degenerate triangles")
     if alpha > 0:
         _check_scale(S, m, 1.0, alpha, 'alpha', alpha * m.sum())
+    can_split = beta > 0 and alpha * alpha >= 4 * beta
+    if split and not can_split:
+        raise ValueError(f"split=True needs alpha^2 >= 4 beta (and beta > "
+                         f"0) for real factors; got alpha={alpha:g}, "
+                         f"beta={beta:g}: leave split unset")
+    if can_split and split is not False:
+        root = math.sqrt(alpha * alpha - 4 * beta)
+        factors = ((alpha + root) / 2, (alpha - root) / 2)
+        if solver is None:
+            solver = _default_solver(data, ratio, lower_bound)
+        infos = []
+        for weight in factors:
+            # The second solve's load M z is the first's mass-weighted
+            # solution; both matrices are Laplace-type.
+            y = _solve(data, (sp.diags(m) + weight * S).tocsr(), m, y,
+                       solver, tol, ratio, lower_bound, cycle, max_iter,
+                       method)
+            infos.append(solver.info)
+        solver.info = combined_info(infos)
+        return y
     A = sp.diags(m) + alpha * S
     if beta > 0:
         A = A + beta * (S @ sp.diags(1.0 / m) @ S)
         A = 0.5 * (A + A.T)  # exactly symmetric despite rounding
     return _solve(data, A.tocsr(), m, y, solver, tol, ratio, lower_bound,
                   cycle, max_iter, method)
+
+
+def combined_info(infos) -> SolveInfo:
+    """One :class:`SolveInfo` for solves run one after the other."""
+    out = SolveInfo(converged=all(i.converged for i in infos),
+                    cached=all(i.cached for i in infos))
+    offset = 0.0
+    for info in infos:
+        out.iterations += info.iterations
+        out.residuals += info.residuals
+        out.times += [offset + info.setup_time + t for t in info.times]
+        out.setup_time += info.setup_time
+        out.solve_time += info.solve_time
+        offset += info.setup_time + info.solve_time
+        out.direct = out.direct or info.direct
+        out.reason = out.reason or info.reason
+    return out
 
 
 def poisson(data, eta: float, y: Optional[Tensor] = None,

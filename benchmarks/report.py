@@ -683,6 +683,46 @@ def gravo_mg(d, _):
     return [(claim, 'gravo_mg.py', result)]
 
 
+@rows_for('gravo_applications')
+def gravo_applications(d, _):
+    def case(r):
+        if 'step' in r:
+            return 'conformal flow (per step)'
+        if r['beta'] == 0:
+            return f"Laplace alpha={r['alpha']:g}"
+        return (f"bi-Laplace alpha={r['alpha']:g}, beta={r['beta']:g}"
+                + (' (split)' if r['split'] else ' (full, PCG)'))
+
+    def versus(r):
+        out = f"**{seconds(r['ours_s'])} s** ({r['ours_best']})"
+        peers = [('cholespy', 'cholespy'), ('cholespy_split', 'split'),
+                 ('splu', 'splu')]
+        out += ' vs ' + ', '.join(
+            f"{label} {seconds(r[key + '_s'])} s "
+            f"({times(r[key + '_s'] / r['ours_s'], 1)})"
+            for key, label in peers if key + '_s' in r)
+        return f"{case(r)}: {out}"
+
+    rows = d['smoothing'] + [d['conformal_flow']]
+    worst = max(max(r[r['ours_best']]['difference'] for r in d['smoothing']),
+                d['conformal_flow'][d['conformal_flow']['ours_best']]
+                ['difference'])
+    flow = d['conformal_flow']
+    result = (f"{d['surface']} ({thousands(d['vertices'], 0)} vertices), "
+              f"assembly included, hierarchy built once "
+              f"({seconds(d['hierarchy_s'])} s): "
+              + '; '.join(versus(r) for r in rows)
+              + f"; results equal the direct solver's to {sci(worst)} "
+              f"(relative); PCG iterations per flow step "
+              f"{min(flow['pcg']['iterations'])}-"
+              f"{max(flow['pcg']['iterations'])}")
+    if not d['cholespy']:
+        result += '; cholespy was not installed'
+    return [('Gravo MG applications: smoothing sweep and conformal flow '
+             f"vs direct solvers, tolerance {d['tol']:g}",
+             'gravo_applications.py', result)]
+
+
 @rows_for('hsn_accuracy')
 def hsn_accuracy(d, _):
     parts = []

@@ -1,6 +1,6 @@
 """tg-intrinsic solve: outputs against the library called directly and a
-direct scipy solve, fairing, bi-Laplacian, point clouds, and every bad
-input ending in one line with exit code 2."""
+direct scipy solve, fairing, bi-Laplacian, the conformal flow, point
+clouds, and every bad input ending in one line with exit code 2."""
 import json
 import os
 import subprocess
@@ -15,7 +15,8 @@ from scipy.sparse.linalg import spsolve
 from torch_geometric.data import Data
 
 from tg_intrinsic.io import read_surface, write_ply
-from tg_intrinsic.solvers import poisson, smooth, stiffness_and_mass
+from tg_intrinsic.solvers import (conformal_flow, poisson, smooth,
+                                  stiffness_and_mass)
 
 from tests.cli import run_cli
 
@@ -143,6 +144,29 @@ def test_bilaplacian_matches_a_direct_solve(files, tmp_path, capsys):
     assert report['solver']['cycle'] == 'W'
 
 
+def test_conformal_flow_is_the_library_flow(files, tmp_path, capsys):
+    paths, pos, face, _, _ = files
+    out = str(tmp_path / 'flow')
+    code, stdout, stderr = cli(['solve', paths['obj'], '--conformal-flow',
+                                '0.05', '--steps', '3', '--out', out]
+                               + HIERARCHY, capsys)
+    assert code == 0, stderr
+    flowed, _, props = read_surface(os.path.join(out, 'result.ply'))
+    expected = conformal_flow(mesh_data(pos, face), 0.05, 3, ratio=4,
+                              lower_bound=10)[-1].numpy()
+    assert np.abs(flowed - expected).max() < 1e-6
+    assert np.array_equal(np.stack([props[f'signal_{k}'] for k in range(3)],
+                                   1), pos)
+    with open(os.path.join(out, 'report.json')) as f:
+        report = json.load(f)
+    assert report['problem'] == 'conformal flow'
+    assert report['parameters'] == {'step': 0.05, 'steps': 3}
+    solver = report['solver']
+    assert solver['method'] == 'pcg' and solver['converged']
+    assert solver['cycles'] == len(solver['residuals']) >= 3
+    assert 'PCG iterations (one V-cycle each) over 3 steps' in stdout
+
+
 @pytest.mark.parametrize('source', ['heat', 'PLY:heat'])
 def test_poisson_solution_satisfies_the_system(files, tmp_path, capsys,
                                                source):
@@ -239,7 +263,13 @@ def test_a_solve_that_does_not_converge_warns(files, tmp_path, capsys):
     (['obj', '--smooth', '1', '--signal', 'no_such_property'],
      'neither'),
     (['obj', '--smooth', '1', '--ratio', '0.5'], '--ratio must be greater'),
-    (['obj'], 'one of the arguments --smooth --poisson is required'),
+    (['obj'], 'one of the arguments --smooth --poisson --conformal-flow '
+     'is required'),
+    (['cloud', '--conformal-flow', '0.1'], 'needs a triangle mesh'),
+    (['obj', '--conformal-flow', '0.1', '--signal', 'npy'],
+     'leave out --signal'),
+    (['obj', '--smooth', '1', '--method', 'gmres'],
+     "argument --method: invalid choice"),
 ])
 def test_bad_input_is_one_line_and_exit_code_2(files, tmp_path, capsys,
                                                argv, message):

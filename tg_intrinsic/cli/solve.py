@@ -1,14 +1,15 @@
 """Smooths a signal on a mesh or point cloud, (M + alpha S) x = M y with an
 optional bi-Laplacian term beta S M^-1 S, or solves the screened Poisson
-problem (S + eta M) x = M y, with Gravo MG; S is the cotan Laplacian of a
-manifold mesh, else the robust Laplacian (point clouds, non-manifold
-meshes), M the lumped masses. Without --signal, --smooth smooths the
-vertex positions (implicit fairing).
+problem (S + eta M) x = M y, or runs the conformalized mean curvature
+flow (M_t + h S_0) p_t+1 = M_t p_t of a mesh, with Gravo MG; S is the cotan
+Laplacian of a manifold mesh, else the robust Laplacian (point clouds,
+non-manifold meshes), M the lumped masses. Without --signal, --smooth
+smooths the vertex positions (implicit fairing).
 
 Writes to --out: result.ply (the surface, with the input signal and the
 result as vertex properties 'signal' and 'result', or 'signal_0..' and
-'result_0..' for several channels; after fairing the positions are the
-smoothed ones), result.png (the result drawn on the surface) and
+'result_0..' for several channels; after fairing or the flow the
+positions are the new ones), result.png (the result drawn on the surface) and
 report.json (the problem, the Laplacian, the hierarchy, the residual of
 every cycle and the timings)."""
 import os
@@ -17,7 +18,8 @@ import time
 from .common import (UsageError, default_of, stage, output_folder,
                      positive_float, positive_int)
 
-HELP = 'smooth a signal or solve a screened Poisson problem with Gravo MG'
+HELP = ('smooth a signal, solve a screened Poisson problem or flow a mesh '
+        'with Gravo MG')
 EXAMPLE = """examples:
   tg-intrinsic solve bunny.obj --smooth 1e-3 --out runs/fair
       # implicit fairing: smooths the vertex positions
@@ -27,6 +29,8 @@ EXAMPLE = """examples:
   tg-intrinsic solve scan.ply --poisson 10 --signal quality --out out
       # 'quality' is a vertex property of scan.ply (a point cloud works)
   tg-intrinsic solve bunny.obj --poisson 1 --signal f.ply:heat --tol 1e-10
+  tg-intrinsic solve bunny.obj --conformal-flow 1e-3 --steps 10 --out out
+      # conformalized mean curvature flow: a new matrix every step
 
 A signal is a .npy, .txt or .csv file with one row per vertex (one or more
 columns), FILE.ply:NAME (vertex property NAME of a PLY file with the same
@@ -34,8 +38,8 @@ vertices) or NAME alone (a vertex property of MESH)."""
 
 
 def add_arguments(parser):
-    from tg_intrinsic.solvers import smooth
-    from tg_intrinsic.solvers.gravo_mg import CYCLES
+    from tg_intrinsic.solvers import conformal_flow, smooth
+    from tg_intrinsic.solvers.gravo_mg import CYCLES, METHODS
     parser.add_argument('mesh', metavar='MESH',
                         help='an OBJ, OFF, PLY or STL mesh or point cloud')
     problem = parser.add_mutually_exclusive_group(required=True)
@@ -45,6 +49,22 @@ def add_arguments(parser):
     problem.add_argument('--poisson', type=positive_float, metavar='ETA',
                          help='screened Poisson: (S + ETA M) x = M y '
                          '(needs --signal)')
+    problem.add_argument('--conformal-flow', type=positive_float,
+                         metavar='STEP', help='conformalized mean curvature '
+                         'flow of the mesh: (M_t + STEP S_0) p_t+1 = M_t p_t, '
+                         '--steps times, keeping the area and centroid; STEP '
+                         'is in squared length units of MESH')
+    parser.add_argument('--steps', type=positive_int,
+                        default=default_of(conformal_flow, 'steps'),
+                        help='with --conformal-flow: number of implicit '
+                        'steps (default: %(default)s)')
+    parser.add_argument('--method', choices=METHODS, default=None,
+                        help="'cycles' (V/W/F-cycles) or 'pcg' (conjugate "
+                        "gradients preconditioned by one cycle; fewer "
+                        "iterations for the bi-Laplacian) (default: "
+                        f"{default_of(smooth, 'method')}, "
+                        f"{default_of(conformal_flow, 'method')} for the "
+                        f"flow)")
     parser.add_argument('--bilaplacian', type=positive_float, default=None,
                         metavar='BETA', help='with --smooth: add BETA S M^-1 '
                         'S (bi-Laplacian smoothing, which keeps more of the '
@@ -63,7 +83,8 @@ def add_arguments(parser):
                         'few cycles more than 1e-6)')
     parser.add_argument('--max-cycles', type=positive_int,
                         default=default_of(smooth, 'max_iter'),
-                        help='most multigrid cycles (default: %(default)s)')
+                        help='most multigrid cycles, or PCG iterations, '
+                        'per solve (default: %(default)s)')
     parser.add_argument('--cycle', choices=CYCLES,
                         default=default_of(smooth, 'cycle'),
                         help='multigrid cycle (default: %(default)s)')
@@ -83,6 +104,11 @@ def _problem(args):
     if args.poisson is not None:
         return ('poisson', '(S + eta M) x = M y', {'eta': args.poisson},
                 f'screened Poisson (S + {args.poisson:g} M) x = M y')
+    if args.conformal_flow is not None:
+        h = args.conformal_flow
+        return ('conformal flow', '(M_t + h S_0) p_t+1 = M_t p_t',
+                {'step': h, 'steps': args.steps},
+                f'conformal flow, {args.steps} steps of h = {h:g}')
     alpha, beta = args.smooth, args.bilaplacian
     if beta is None:
         name = 'fairing' if args.signal is None else 'smooth'
@@ -103,8 +129,10 @@ def run(args):
 
     from tg_intrinsic.io import read_signal, read_surface, write_ply
     from tg_intrinsic.io.figures import draw_surface
-    from tg_intrinsic.solvers import GravoMG, poisson, smooth
-    from tg_intrinsic.solvers.systems import uses_robust_laplacian
+    from tg_intrinsic.solvers import (GravoMG, conformal_flow, poisson,
+                                      smooth)
+    from tg_intrinsic.solvers.systems import (combined_info,
+                                              uses_robust_laplacian)
     from tg_intrinsic.transforms import GravoHierarchy
     from tg_intrinsic.utils import atomic_write_json
 
@@ -116,6 +144,9 @@ def run(args):
                          "SOURCE (a .npy/.txt/.csv file with one row per "
                          "vertex, FILE.ply:NAME, or a vertex property of "
                          "MESH)")
+    if args.conformal_flow is not None and args.signal is not None:
+        raise UsageError("--conformal-flow moves the mesh itself; leave out "
+                         "--signal")
     if args.ratio <= 1:
         raise UsageError(f"--ratio must be greater than 1 (each level keeps "
                          f"about 1/RATIO of the points), got {args.ratio:g}")
@@ -127,6 +158,9 @@ def run(args):
         n = len(pos)
         y = pos.copy() if args.signal is None else \
             read_signal(args.signal, n, properties)
+    if args.conformal_flow is not None and face is None:
+        raise UsageError(f"--conformal-flow needs a triangle mesh, but "
+                         f"{args.mesh} is a point cloud (no faces)")
     out = output_folder(args.out or os.path.join(
         'runs', 'solve_' + os.path.splitext(os.path.basename(
             args.mesh))[0]))
@@ -152,13 +186,22 @@ def run(args):
     channels = y.reshape(n, -1).shape[1]
     with stage(f"solving {equation} ({channels} channel(s))", quiet, times,
                 'total_solve'):
-        options = dict(y=torch.from_numpy(y), solver=solver, tol=args.tol,
-                       cycle=args.cycle, max_iter=args.max_cycles)
-        if args.poisson is not None:
-            x = poisson(data, args.poisson, **options)
+        method = args.method or default_of(
+            smooth if args.conformal_flow is None else conformal_flow,
+            'method')
+        options = dict(solver=solver, tol=args.tol, cycle=args.cycle,
+                       max_iter=args.max_cycles, method=method)
+        if args.conformal_flow is not None:
+            steps = []
+            x = conformal_flow(data, args.conformal_flow, args.steps,
+                               callback=lambda t, i: steps.append(i),
+                               **options)[-1]
+            solver.info = combined_info(steps)
+        elif args.poisson is not None:
+            x = poisson(data, args.poisson, y=torch.from_numpy(y), **options)
         else:
             x = smooth(data, args.smooth, beta=args.bilaplacian or 0.0,
-                       **options)
+                       y=torch.from_numpy(y), **options)
         x = x.numpy()
     info = solver.info
     times['setup'] = info.setup_time
@@ -196,7 +239,7 @@ def run(args):
                       'graph': 'mesh edges' if face is not None else
                       f'k-nearest neighbours (k = {coarsen.k})',
                       'level_sizes': sizes},
-        'solver': {'cycle': args.cycle, 'tol': args.tol,
+        'solver': {'method': method, 'cycle': args.cycle, 'tol': args.tol,
                    'max_cycles': args.max_cycles,
                    'cycles': info.iterations,
                    'final_relative_residual': info.residuals[-1]
@@ -248,8 +291,15 @@ def _summary(report: dict, mesh: str, out: str):
     else:
         state = 'converged' if solver['converged'] else \
             'NOT converged (raise --max-cycles or --tol)'
-        how = (f"{solver['cycles']} {solver['cycle']}-cycles to relative "
-               f"residual {solver['final_relative_residual']:.2g}, {state}")
+        if solver['method'] == 'pcg':
+            how = (f"{solver['cycles']} PCG iterations (one "
+                   f"{solver['cycle']}-cycle each)")
+        else:
+            how = f"{solver['cycles']} {solver['cycle']}-cycles"
+        if report['problem'] == 'conformal flow':
+            how += f" over {report['parameters']['steps']} steps, each"
+        how += (f" to relative residual "
+                f"{solver['final_relative_residual']:.2g}, {state}")
     print(f"  hierarchy {levels} ({seconds['hierarchy']:.2f} s); {how}; "
           f"setup {seconds['setup']:.2f} s, solve {seconds['solve']:.2f} s")
     print(f"  wrote {os.path.join(out, 'result.ply')}, result.png and "

@@ -36,6 +36,8 @@ extras_require = {
     'exr': ['OpenEXR>=3.2'],
     # ScanObjectNN's HDF5 files.
     'h5': ['h5py>=3.8'],
+    # The direct-solver peer (CHOLMOD) of benchmarks/gravo_applications.py.
+    'benchmarks': ['cholespy>=2.0'],
     # The external renderer of the SVBRDF oracle test and benchmark
     # (its llvm variant also needs: apt-get install libllvm19).
     'mitsuba': ['mitsuba>=3.5'],

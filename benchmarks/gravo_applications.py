@@ -25,7 +25,7 @@ Timed end to end per solve, relative residual 1e-8 (TOL) for ours:
   splu      scipy's sparse LU (SuperLU, COLAMD ordering) of the same
             system, assembly + factorisation + solve
   cholespy  CHOLMOD's supernodal Cholesky through cholespy (when
-            installed: pip install cholespy), the same steps; for the
+            installed: pip install -e .[benchmarks]), the same steps; for the
             split systems also on the two factors (cholespy_split), which
             is the direct solver's best use of the same algebra
 Each solve's result is compared with cholespy's (or splu's): the largest

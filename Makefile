@@ -30,6 +30,7 @@ test: $(STAMP)
 
 # Every benchmark script, then the README's results table from their JSON.
 benchmarks: $(STAMP)
+	$(BIN)/pip install -e ".[benchmarks]"
 	for script in benchmarks/*.py; do \
 		[ $$script = benchmarks/report.py ] || $(BIN)/python $$script || exit 1; \
 	done

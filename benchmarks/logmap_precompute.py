@@ -7,7 +7,9 @@ For ~2.5k, ~10k and ~50k-vertex meshes (decimated from a scan under
 --meshes, default koala.obj; generated icospheres if absent), scaled to unit
 area, with discs of geodesic radius eps = 0.2, it times
 
-* graph:       geodesic_neighbourhoods (fast marching), shared by all methods
+* graph:       geodesic_neighbourhoods (fast marching), needed by ours only
+               (the original reads each disc off its global log map), so
+               the end-to-end speed-ups (*_with_graph) charge it to ours
 * weights:     vertex_area_weights
 * fast:        log_map(method='fast')
 * vector_heat: log_map(method='vector_heat'): our affine heat solver on
@@ -238,12 +240,14 @@ def run(label, pos, face, eps, workers, region, orig_count, seed):
     row['speedup_vector_heat_1worker'] = (row['original_s']
                                           / row['vector_heat_1worker_s'])
     row['speedup_fast'] = row['original_s'] / row['fast_s']
-    # End to end: every pipeline also builds the graph and the weights.
-    shared = row['graph_s'] + row['weights_s']
-    row['speedup_vector_heat_with_graph'] = ((row['original_s'] + shared)
-                                             / (row['vector_heat_s'] + shared))
-    row['speedup_fast_with_graph'] = ((row['original_s'] + shared)
-                                      / (row['fast_s'] + shared))
+    # End to end: ours also builds the disc graph by fast marching; the
+    # original reads its discs off the global log maps it computes anyway,
+    # so only the area weights are shared.
+    ours = row['graph_s'] + row['weights_s']
+    theirs = row['original_s'] + row['weights_s']
+    row['speedup_vector_heat_with_graph'] = theirs / (row['vector_heat_s']
+                                                      + ours)
+    row['speedup_fast_with_graph'] = theirs / (row['fast_s'] + ours)
     row['accuracy_vs_original'] = {
         'vector_heat': errors([t[sel] for t in vec], orig, eps,
                               edge_index[:, sel]),
@@ -296,7 +300,9 @@ def main():
     atomic_write_json(os.path.join(args.out, 'logmap_precompute.json'), {
         'machine': machine_info(),
         'protocol': __doc__,
-        'goals': {'vector_heat_speedup': 5, 'fast_speedup': 50},
+        # The graph-inclusive goal is issue 18's, at 10k and 50k vertices.
+        'goals': {'vector_heat_speedup': 5, 'fast_speedup': 50,
+                  'vector_heat_with_graph_speedup': 5},
         'rows': rows})
     plot(rows, os.path.join(args.out, 'logmap_precompute.png'))
 

@@ -1087,6 +1087,23 @@ def svbrdf_speed(d, _):
     return [('SVBRDF building blocks, CPU', 'svbrdf_speed.py', result)]
 
 
+# ---------------------------------------------------------- part segmentation
+@rows_for('part_segmentation')
+def part_segmentation(d, _):
+    p = d['protocol']
+    runs = ', '.join(
+        f"{r['label']} **{pct(r['final_instance_miou'], 1)}** / "
+        f"{pct(r['final_class_miou'], 1)} ({r['parameters'] / 1e6:.2f}M "
+        f"parameters, {seconds(r['seconds_per_epoch'])} s per epoch)"
+        for r in d['runs'])
+    result = (f"instance / class mIoU after {p['epochs']} epochs on "
+              f"{5 * p['train_per_category']} training shapes of "
+              f"{p['num_points']} points, {5 * p['test_per_category']} "
+              f"test shapes: {runs}")
+    return [('Delta-U-ResNet vs DeltaNet, part segmentation '
+             '(SyntheticShapeParts)', 'part_segmentation.py', result)]
+
+
 # ------------------------------------------------------------------ table
 def load_results(directory: str) -> Dict[str, dict]:
     results = {}

@@ -83,9 +83,9 @@ class _ResNetBlock(torch.nn.Module):
 
 class DeltaUResNet(torch.nn.Module):
     r"""The Delta-U-ResNet for per-point segmentation, from the DeltaConv
-    thesis (Wiersma, "Intrinsic geometry for learning on curved surfaces",
-    appendix A.2; the `"DeltaConv" <https://arxiv.org/abs/2111.08799>`_
-    operators in the U-ResNet of KPFCNN, Thomas et al., ICCV 2019).
+    thesis of R. Wiersma (appendix A.2: the `"DeltaConv"
+    <https://arxiv.org/abs/2111.08799>`_ operators in the U-ResNet of
+    KPFCNN, Thomas et al., ICCV 2019).
 
     Four encoder scales with two bottleneck ResNet blocks each, whose
     middle layer is a :class:`DeltaConv`; every scale keeps a quarter of

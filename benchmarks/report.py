@@ -1128,6 +1128,36 @@ def svbrdf_speed(d, _):
     return [('SVBRDF building blocks, CPU', 'svbrdf_speed.py', result)]
 
 
+# ---------------------------------------------------------- part segmentation
+@rows_for('part_segmentation')
+def part_segmentation(d, _):
+    p = d['protocol']
+    def median(values):
+        values = sorted(values)
+        half = len(values) // 2
+        return values[half] if len(values) % 2 else \
+            (values[half - 1] + values[half]) / 2
+
+    runs = ', '.join(
+        f"{r['label']} **{pct(r['final_instance_miou'], 1)}** / "
+        f"{pct(r['final_class_miou'], 1)} ({r['parameters'] / 1e6:.2f}M "
+        f"parameters, median "
+        f"{seconds(median([h['seconds'] for h in r['history']]))} s per "
+        f"epoch)" for r in d['runs'])
+    result = (f"instance / class mIoU after {p['epochs']} epochs on "
+              f"{5 * p['train_per_category']} training shapes of "
+              f"{p['num_points']} points, {5 * p['test_per_category']} "
+              f"test shapes (10 per category, so the two agree), one "
+              f"seed: {runs}")
+    gravo = d['level_sizes'].get('gravo')
+    if gravo:
+        result += ("; Gravo levels keep " + ' / '.join(
+            f"{n:.0f}" for n in gravo) + " points (FPS " + ' / '.join(
+            f"{n:.0f}" for n in d['level_sizes']['fps']) + ")")
+    return [('Delta-U-ResNet vs DeltaNet, part segmentation '
+             '(SyntheticShapeParts)', 'part_segmentation.py', result)]
+
+
 # ------------------------------------------------------------------ table
 def load_results(directory: str) -> Dict[str, dict]:
     results = {}

@@ -144,3 +144,15 @@ def test_formatting_helpers():
         report.thousands(2028099) == '2.0M'
     assert report.span_pct([0.8613, 1.0]) == '86-100%'
     assert report.test_set_size([0.95, 0.925, 1 / 12, 109 / 120]) == 120
+
+
+def test_the_part_segmentation_row_follows_its_numbers(copies):
+    results, _ = copies
+    before = report.build_table(str(results))
+
+    def better(data):
+        data['runs'][0]['final_instance_miou'] = 0.987
+
+    edit(results / 'part_segmentation.json', better)
+    after = report.build_table(str(results))
+    assert '98.7%' not in before and '98.7%' in after

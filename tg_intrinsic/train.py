@@ -56,13 +56,15 @@ from tg_intrinsic.protocols import DEFAULT_PROTOCOL, PROTOCOLS, get_protocol
 from tg_intrinsic.utils import (atomic_torch_save, atomic_write,
                                 atomic_write_json, remove_temporaries)
 
-DATASETS = ('synthetic_modelnet', 'synthetic_shrec', 'mesh_folder')
+DATASETS = ('synthetic_modelnet', 'synthetic_shrec', 'mesh_folder',
+            'synthetic_parts')
 MODELS = ('deltanet', 'hsn')
 TASKS = ('classification', 'segmentation')
 ROTATIONS = ('none', 'so3', 'x', 'y', 'z', 'xyz')
 # The data sets each model and task can train on.
-SUPPORTED = {('deltanet', 'classification'): DATASETS,
-             ('deltanet', 'segmentation'): ('synthetic_shrec', 'mesh_folder'),
+SUPPORTED = {('deltanet', 'classification'): DATASETS[:3],
+             ('deltanet', 'segmentation'): ('synthetic_shrec', 'mesh_folder',
+                                            'synthetic_parts'),
              ('hsn', 'classification'): ('synthetic_shrec', 'mesh_folder'),
              ('hsn', 'segmentation'): ('synthetic_shrec', 'mesh_folder')}
 DEFAULT_DATASET = {'deltanet': 'synthetic_modelnet',
@@ -123,6 +125,15 @@ def source_splits(args):
                               1, args.shapes_per_class // 2))
         path = os.path.join(args.root, 'SyntheticSHREC')
         return [SyntheticSHREC(path, split, **kwargs)
+                for split in ('train', 'test')]
+    if args.dataset == 'synthetic_parts':
+        from tg_intrinsic.datasets import SyntheticShapeParts
+        kwargs = dict(num_points=args.num_points, seed=args.data_seed)
+        if args.shapes_per_class is not None:
+            half = max(1, args.shapes_per_class // 2)
+            kwargs['num_per_category'] = (half, half)
+        path = os.path.join(args.root, 'SyntheticShapeParts')
+        return [SyntheticShapeParts(path, split, **kwargs)
                 for split in ('train', 'test')]
     if args.mesh_root is None:
         raise ValueError("--dataset mesh_folder needs --mesh-root PATH")

@@ -125,3 +125,15 @@ def test_more_user_mistakes_end_in_one_line_before_any_work(
     code, _, err = run_cli(capsys, 'train', *argv)
     assert_user_error(code, err, 'train', *needles)
     assert trained == []  # nothing was trained
+
+
+def test_synthetic_parts_trains_deltanet_segmentation(capsys, trained):
+    code, _, err = run_cli(capsys, 'train', 'deltanet', '--task',
+                           'segmentation', '--dataset', 'synthetic-parts')
+    assert code == 0, err
+    assert (trained[-1].dataset, trained[-1].protocol) == \
+        ('synthetic_parts', 'deltanet-shapenet-part')
+    code, _, err = run_cli(capsys, 'train', 'deltanet', '--dataset',
+                           'synthetic-parts')
+    assert_user_error(code, err, 'train', 'deltanet classification cannot '
+                      'train on synthetic_parts')

@@ -14,6 +14,8 @@ EXAMPLE = """examples:
   tg-intrinsic train hsn --task segmentation --dataset path/to/human_seg
       # MeshCNN's layout: train/, test/, seg/*.eseg
   tg-intrinsic train deltanet --dataset synthetic-shrec --resume --out runs/x
+  tg-intrinsic train deltanet --task segmentation --dataset synthetic-parts
+      # generated ShapeNet-Part-style parts (5 categories, 16 parts)
 
 Every option left out takes the value of the protocol (--protocol, else
 the model and task's default: deltanet-modelnet40, deltanet-shapenet-part,
@@ -24,7 +26,8 @@ ShapeNet-Part (normal), ScanObjectNN h5_files.
 Also available as "python -m tg_intrinsic.train --model deltanet ..."."""
 
 SYNTHETIC = {'synthetic-modelnet': 'synthetic_modelnet',
-             'synthetic-shrec': 'synthetic_shrec'}
+             'synthetic-shrec': 'synthetic_shrec',
+             'synthetic-parts': 'synthetic_parts'}
 
 
 def add_arguments(parser):
@@ -32,7 +35,8 @@ def add_arguments(parser):
     parser.add_argument('model', choices=MODELS,
                         help='deltanet (point clouds) or hsn (meshes)')
     parser.add_argument('--dataset', default=None,
-                        metavar='{synthetic-modelnet,synthetic-shrec,FOLDER}',
+                        metavar='{synthetic-modelnet,synthetic-shrec,'
+                        'synthetic-parts,FOLDER}',
                         help='a generated data set, or a folder of meshes '
                         'laid out as FOLDER/<class>/<train|test>/*.off|obj|ply'
                         ' (default: synthetic-modelnet for deltanet, '

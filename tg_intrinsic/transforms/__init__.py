@@ -20,6 +20,7 @@ from .clean_mesh import CleanMesh
 from .decimate import Decimate
 from .farthest_point_resample import FarthestPointResample
 from .texture_texels import TextureTexels
+from .pooling_levels import PoolingLevels
 
 __all__ = ['EstimateNormals', 'TangentFrames', 'MLSOperators',
            'RandomRotation', 'RandomAxisScale', 'RandomTranslation',
@@ -27,4 +28,4 @@ __all__ = ['EstimateNormals', 'TangentFrames', 'MLSOperators',
            'MultiscaleSupports', 'HarmonicPrecompute', 'GravoHierarchy', 'ProjectViews',
            'FitSphericalHarmonics', 'SpectralUncertainty', 'SelectViews',
            'keep_views', 'CleanMesh', 'Decimate', 'FarthestPointResample',
-           'TextureTexels']
+           'TextureTexels', 'PoolingLevels']

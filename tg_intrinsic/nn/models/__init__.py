@@ -3,6 +3,7 @@ from .deltanet_classification import DeltaNetClassification
 from .deltanet_segmentation import DeltaNetSegmentation
 from .hsn_classification import HSNClassification
 from .hsn_segmentation import HSNSegmentation
+from .delta_u_resnet import DeltaUResNet
 
 __all__ = ['DeltaNetClassification', 'DeltaNetSegmentation',
-           'HSNClassification', 'HSNSegmentation']
+           'HSNClassification', 'HSNSegmentation', 'DeltaUResNet']

@@ -3,6 +3,9 @@ from .deltanet_classification import DeltaNetClassification
 from .deltanet_segmentation import DeltaNetSegmentation
 from .hsn_classification import HSNClassification
 from .hsn_segmentation import HSNSegmentation
+from .hsn_u_resnet import HSNUResNet
+from .hsn_correspondence import HSNCorrespondence
 
 __all__ = ['DeltaNetClassification', 'DeltaNetSegmentation',
-           'HSNClassification', 'HSNSegmentation']
+           'HSNClassification', 'HSNSegmentation', 'HSNUResNet',
+           'HSNCorrespondence']

@@ -20,6 +20,9 @@ r"""Offline, deterministic datasets of curved surfaces (no downloads).
   an independent estimator of the reflection integral (ground truth for
   SVBRDF recovery); :func:`look_at_cameras` builds its pinhole cameras.
 * :func:`bumpy_torus`: a closed bumpy torus of any size, for solvers.
+* :class:`SyntheticCorrespondence`: one template mesh in many
+  near-isometric poses (dense correspondence, FAUST-style), with
+  :func:`correspondence_accuracy`.
 """
 from .synthetic_shrec import SyntheticSHREC
 from .synthetic_modelnet import SyntheticModelNet
@@ -31,6 +34,8 @@ from .scanobjectnn import ScanObjectNN
 from .folder import open_folder
 from .svbrdf_scene import svbrdf_scene, look_at_cameras
 from .surfaces import bumpy_torus
+from .synthetic_correspondence import (SyntheticCorrespondence,
+                                       correspondence_accuracy)
 
 __all__ = [
     'SyntheticSHREC',
@@ -44,4 +49,6 @@ __all__ = [
     'svbrdf_scene',
     'look_at_cameras',
     'bumpy_torus',
+    'SyntheticCorrespondence',
+    'correspondence_accuracy',
 ]

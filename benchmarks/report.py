@@ -1087,6 +1087,25 @@ def svbrdf_speed(d, _):
     return [('SVBRDF building blocks, CPU', 'svbrdf_speed.py', result)]
 
 
+
+@rows_for('hsn_correspondence')
+def hsn_correspondence(d, _):
+    runs = d['runs']
+    parts = [f"{r['model']}: **{pct(r['within_0.05'])} within 0.05**, "
+             f"{pct(r['exact'])} exact, {pct(r['within_0.1'])} within 0.1 "
+             f"({thousands(r['parameters'])} parameters, backbone "
+             f"{thousands(r['backbone_parameters'])}; "
+             f"{seconds(r['seconds_per_epoch'])} s per epoch)"
+             for r in runs]
+    result = (f"{d['num_train']} training / {d['num_test']} test poses of "
+              f"a {d['num_vertices']}-vertex template, "
+              f"{d['input']} as input, {d['epochs']} epochs, one seed; "
+              f"fraction of test vertices whose predicted template vertex "
+              f"is within a geodesic error (relative to the diameter) of "
+              f"the true one: " + '; '.join(parts))
+    return [('HSN U-ResNet correspondence vs a non-equivariant baseline '
+             '(SyntheticCorrespondence)', 'hsn_correspondence.py', result)]
+
 # ------------------------------------------------------------------ table
 def load_results(directory: str) -> Dict[str, dict]:
     results = {}

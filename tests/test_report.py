@@ -144,3 +144,19 @@ def test_formatting_helpers():
         report.thousands(2028099) == '2.0M'
     assert report.span_pct([0.8613, 1.0]) == '86-100%'
     assert report.test_set_size([0.95, 0.925, 1 / 12, 109 / 120]) == 120
+
+
+def test_the_correspondence_row_follows_its_curves(copies):
+    results, _ = copies
+    before = report.build_table(str(results))
+
+    def better_hsn(data):
+        run = data['runs'][0]
+        assert run['model'].startswith('HSN')
+        run['within_0.05'] = 0.987
+
+    edit(results / 'hsn_correspondence.json', better_hsn)
+    after = report.build_table(str(results))
+    changed = [line for line in after.split('\n')
+               if line not in before.split('\n')]
+    assert len(changed) == 1 and '**99% within 0.05**' in changed[0]

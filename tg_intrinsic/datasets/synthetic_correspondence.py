@@ -171,7 +171,8 @@ class SyntheticCorrespondence(GeneratedDataset):
                     self_intersections(W, F) == 0:
                 break
         else:  # pragma: no cover - half the angles always worked so far
-            W = V.copy()
+            raise RuntimeError('no valid pose found in 20 draws; lower '
+                               "'pose'")
         if self.rotate:
             W = W @ shapes.random_rotation(rng).T
         order = rng.permutation(len(V)) if self.permute \

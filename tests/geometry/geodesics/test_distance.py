@@ -49,3 +49,11 @@ def test_disconnected_mesh_is_refused():
     face2 = torch.cat([face, face + pos.size(0)], 1)
     with pytest.raises(ValueError, match='not connected'):
         geodesic_distances(pos2, face2)
+
+
+def test_bad_faces_are_explained():
+    pos, face = icosphere(1)
+    with pytest.raises(ValueError, match=r"must have shape \[3, F\]"):
+        geodesic_distances(pos, face.t())
+    with pytest.raises(ValueError, match="indexes vertices"):
+        geodesic_distances(pos, face + 100)

@@ -4,7 +4,7 @@ from typing import Optional
 import torch
 from torch import Tensor
 
-from tg_intrinsic.geometry.checks import check_points
+from tg_intrinsic.geometry.checks import check_faces, check_points
 
 from .logmap import geodesic_neighbourhoods
 
@@ -26,6 +26,7 @@ def geodesic_distances(pos: Tensor, face: Tensor,
           no path reaches raises a :class:`ValueError`
     """
     pos = check_points(pos, min_points=2)
+    face = check_faces(face, pos.size(0), pos)
     num = pos.size(0)
     sources = torch.arange(num, device=pos.device) if sources is None \
         else sources

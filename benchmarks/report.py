@@ -1090,19 +1090,24 @@ def svbrdf_speed(d, _):
 
 @rows_for('hsn_correspondence')
 def hsn_correspondence(d, _):
-    runs = d['runs']
-    parts = [f"{r['model']}: **{pct(r['within_0.05'])} within 0.05**, "
-             f"{pct(r['exact'])} exact, {pct(r['within_0.1'])} within 0.1 "
+    runs, ref = d['runs'], d['hks_nearest_neighbour']
+    parts = [f"{r['model']}: **{pct(r['within_0.05'], 1)} within "
+             f"0.05**, {pct(r['exact'], 1)} exact, "
+             f"{pct(r['within_0.1'], 1)} within 0.1 "
              f"({thousands(r['parameters'])} parameters, backbone "
              f"{thousands(r['backbone_parameters'])}; "
-             f"{seconds(r['seconds_per_epoch'])} s per epoch)"
+             f"{seconds(r['seconds_per_epoch'])} s per epoch on one "
+             f"thread)"
              for r in runs]
     result = (f"{d['num_train']} training / {d['num_test']} test poses of "
               f"a {d['num_vertices']}-vertex template, "
               f"{d['input']} as input, {d['epochs']} epochs, one seed; "
               f"fraction of test vertices whose predicted template vertex "
               f"is within a geodesic error (relative to the diameter) of "
-              f"the true one: " + '; '.join(parts))
+              f"the true one: " + '; '.join(parts)
+              + f"; without learning, the template vertex of nearest HKS: "
+              f"{pct(ref['within_0.05'], 1)} within 0.05, "
+              f"{pct(ref['exact'], 1)} exact")
     return [('HSN U-ResNet correspondence vs a non-equivariant baseline '
              '(SyntheticCorrespondence)', 'hsn_correspondence.py', result)]
 

@@ -159,4 +159,4 @@ def test_the_correspondence_row_follows_its_curves(copies):
     after = report.build_table(str(results))
     changed = [line for line in after.split('\n')
                if line not in before.split('\n')]
-    assert len(changed) == 1 and '**99% within 0.05**' in changed[0]
+    assert len(changed) == 1 and '**98.7% within 0.05**' in changed[0]

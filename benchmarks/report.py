@@ -1111,6 +1111,7 @@ def hsn_correspondence(d, _):
     return [('HSN U-ResNet correspondence vs a non-equivariant baseline '
              '(SyntheticCorrespondence)', 'hsn_correspondence.py', result)]
 
+
 # ------------------------------------------------------------------ table
 def load_results(directory: str) -> Dict[str, dict]:
     results = {}

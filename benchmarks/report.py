@@ -1100,7 +1100,7 @@ def hsn_correspondence(d, _):
              f"thread)"
              for r in runs]
     result = (f"{d['num_train']} training / {d['num_test']} test poses of "
-              f"a {d['num_vertices']}-vertex template, "
+              f"one template of {d['num_vertices']} vertices, "
               f"{d['input']} as input, {d['epochs']} epochs, one seed; "
               f"fraction of test vertices whose predicted template vertex "
               f"is within a geodesic error (relative to the diameter) of "

@@ -1132,6 +1132,7 @@ def svbrdf_speed(d, _):
 @rows_for('part_segmentation')
 def part_segmentation(d, _):
     p = d['protocol']
+
     def median(values):
         values = sorted(values)
         half = len(values) // 2
@@ -1156,6 +1157,30 @@ def part_segmentation(d, _):
             f"{n:.0f}" for n in d['level_sizes']['fps']) + ")")
     return [('Delta-U-ResNet vs DeltaNet, part segmentation '
              '(SyntheticShapeParts)', 'part_segmentation.py', result)]
+
+
+@rows_for('hsn_correspondence')
+def hsn_correspondence(d, _):
+    runs, ref = d['runs'], d['hks_nearest_neighbour']
+    parts = [f"{r['model']}: **{pct(r['within_0.05'], 1)} within "
+             f"0.05**, {pct(r['exact'], 1)} exact, "
+             f"{pct(r['within_0.1'], 1)} within 0.1 "
+             f"({thousands(r['parameters'])} parameters, backbone "
+             f"{thousands(r['backbone_parameters'])}; "
+             f"{seconds(r['seconds_per_epoch'])} s per epoch on one "
+             f"thread)"
+             for r in runs]
+    result = (f"{d['num_train']} training / {d['num_test']} test poses of "
+              f"one template of {d['num_vertices']} vertices, "
+              f"{d['input']} as input, {d['epochs']} epochs, one seed; "
+              f"fraction of test vertices whose predicted template vertex "
+              f"is within a geodesic error (relative to the diameter) of "
+              f"the true one: " + '; '.join(parts)
+              + f"; without learning, the template vertex of nearest HKS: "
+              f"{pct(ref['within_0.05'], 1)} within 0.05, "
+              f"{pct(ref['exact'], 1)} exact")
+    return [('HSN U-ResNet correspondence vs a non-equivariant baseline '
+             '(SyntheticCorrespondence)', 'hsn_correspondence.py', result)]
 
 
 # ------------------------------------------------------------------ table

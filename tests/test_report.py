@@ -156,3 +156,19 @@ def test_the_part_segmentation_row_follows_its_numbers(copies):
     edit(results / 'part_segmentation.json', better)
     after = report.build_table(str(results))
     assert '98.7%' not in before and '98.7%' in after
+
+
+def test_the_correspondence_row_follows_its_curves(copies):
+    results, _ = copies
+    before = report.build_table(str(results))
+
+    def better_hsn(data):
+        run = data['runs'][0]
+        assert run['model'].startswith('HSN')
+        run['within_0.05'] = 0.987
+
+    edit(results / 'hsn_correspondence.json', better_hsn)
+    after = report.build_table(str(results))
+    changed = [line for line in after.split('\n')
+               if line not in before.split('\n')]
+    assert len(changed) == 1 and '**98.7% within 0.05**' in changed[0]

@@ -22,6 +22,9 @@ r"""Offline, deterministic datasets of curved surfaces (no downloads).
 * :func:`bumpy_torus`: a closed bumpy torus of any size, for solvers.
 * :class:`SyntheticShapeParts`: ShapeNet-Part-style part segmentation of
   objects composed from primitives (5 categories, 16 parts).
+* :class:`SyntheticCorrespondence`: one template mesh in many
+  near-isometric poses (dense correspondence, FAUST-style), with
+  :func:`correspondence_accuracy`.
 """
 from .synthetic_shrec import SyntheticSHREC
 from .synthetic_modelnet import SyntheticModelNet
@@ -34,6 +37,8 @@ from .folder import open_folder
 from .svbrdf_scene import svbrdf_scene, look_at_cameras
 from .surfaces import bumpy_torus
 from .synthetic_parts import SyntheticShapeParts
+from .synthetic_correspondence import (SyntheticCorrespondence,
+                                       correspondence_accuracy)
 
 __all__ = [
     'SyntheticSHREC',
@@ -48,4 +53,6 @@ __all__ = [
     'look_at_cameras',
     'bumpy_torus',
     'SyntheticShapeParts',
+    'SyntheticCorrespondence',
+    'correspondence_accuracy',
 ]

@@ -20,6 +20,8 @@ r"""Offline, deterministic datasets of curved surfaces (no downloads).
   an independent estimator of the reflection integral (ground truth for
   SVBRDF recovery); :func:`look_at_cameras` builds its pinhole cameras.
 * :func:`bumpy_torus`: a closed bumpy torus of any size, for solvers.
+* :class:`SphereDigits`: scikit-learn's 8 x 8 digits on an icosphere,
+  upright or rotated (HSN's rotated MNIST on a sphere).
 """
 from .synthetic_shrec import SyntheticSHREC
 from .synthetic_modelnet import SyntheticModelNet
@@ -31,6 +33,7 @@ from .scanobjectnn import ScanObjectNN
 from .folder import open_folder
 from .svbrdf_scene import svbrdf_scene, look_at_cameras
 from .surfaces import bumpy_torus
+from .sphere_digits import SphereDigits
 
 __all__ = [
     'SyntheticSHREC',
@@ -44,4 +47,5 @@ __all__ = [
     'svbrdf_scene',
     'look_at_cameras',
     'bumpy_torus',
+    'SphereDigits',
 ]

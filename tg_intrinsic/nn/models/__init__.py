@@ -3,6 +3,8 @@ from .deltanet_classification import DeltaNetClassification
 from .deltanet_segmentation import DeltaNetSegmentation
 from .hsn_classification import HSNClassification
 from .hsn_segmentation import HSNSegmentation
+from .hsn_conv_classification import HSNConvClassification
 
 __all__ = ['DeltaNetClassification', 'DeltaNetSegmentation',
-           'HSNClassification', 'HSNSegmentation']
+           'HSNClassification', 'HSNSegmentation',
+           'HSNConvClassification']

@@ -18,8 +18,8 @@ is not a multiple of 4), all 450 of the test split; Adam with a
 cosine schedule to lr / 100 (--lr 5e-3), gradients clipped to norm 1
 and steps with a non-finite gradient skipped (counted in the JSON), batch
 32, --epochs epochs, one seed, two CPU threads. Four runs: {one, two
-streams} x {upright, turned training set}; each is tested on the upright and on the turned test set, and the
-agreement of its predictions on the same test digit upright and turned is
+streams} x {upright, turned training set}; each is tested on the
+upright and on the turned test set, and the agreement of its predictions on the same test digit upright and turned is
 recorded (1 for an exactly invariant network). A third test set turns
 the digits by multiples of 72 degrees, which map the icosphere onto
 itself (only the pooling samples do not follow): accuracy there against

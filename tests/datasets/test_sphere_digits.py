@@ -21,7 +21,10 @@ def test_examples_are_the_digits_on_the_icosphere(upright):
     assert len(upright) == 6
     data = upright[1]
     assert data.pos.shape == (642, 3) and data.x.shape == (642, 1)
-    assert data.level_size(1) == 160 and data.level_size(2) == 40
+    assert data.level_size(1) == 162 and data.level_size(2) == 42
+    # the levels are the coarser icospheres, nested
+    assert torch.equal(data.pos_1, data.pos[:162])
+    assert torch.equal(data.pos_2, data.pos[:42])
     # the test split holds every fourth image
     assert data.y.item() == labels[4].item()
     assert torch.allclose(data.x[:, 0],
@@ -93,7 +96,7 @@ def test_bad_input_is_explained():
     with pytest.raises(ValueError, match="split"):
         SphereDigits('val')
     with pytest.raises(ValueError, match="one entry per level"):
-        SphereDigits('test', radii=(0.3, 0.45))
+        SphereDigits('test', radii=(0.3, ))
     with pytest.raises(ValueError, match="'dtype' must be"):
         SphereDigits('test', dtype=torch.int64)
     with pytest.raises(ValueError, match="'limit' must be at least 1"):

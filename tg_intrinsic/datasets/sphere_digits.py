@@ -15,6 +15,7 @@ from tg_intrinsic.transforms import (HarmonicPrecompute, LogMap,
 from .common import check_split
 
 ROTATIONS = ('none', 'axis', 'so3')
+SUBDIVISIONS = 3  # 642 vertices
 
 
 def load_digit_images():
@@ -88,11 +89,17 @@ class SphereDigits(Dataset):
     sphere), :obj:`'none'` keeps it upright. The angles are drawn from
     :obj:`seed` and the example's index, so the data set is deterministic.
 
-    The mesh and its precomputation are shared by all examples and built
-    once: :class:`~tg_intrinsic.transforms.LogMap` with radius
-    ``radii[0]``, :class:`~tg_intrinsic.transforms.MultiscaleSupports` with
-    ``ratios`` and ``radii[1:]``, and
-    :class:`~tg_intrinsic.transforms.HarmonicPrecompute`.
+    The mesh (a third subdivision of the icosahedron, a vertex at the pole)
+    and its precomputation are shared by all examples and built once:
+    :class:`~tg_intrinsic.transforms.LogMap` with radius ``radii[0]``,
+    :class:`~tg_intrinsic.transforms.MultiscaleSupports` with
+    ``radii[1:]`` whose pooling levels are the vertices of the coarser
+    icospheres (162 and 42 vertices, which the finer icosphere lists first;
+    about the paper's ratio of 1/4 per level), and
+    :class:`~tg_intrinsic.transforms.HarmonicPrecompute`. Nested icospheres
+    keep every level symmetric under the icosahedron's rotations, e.g.
+    turns by 72 degrees about the pole, where farthest point sampling would
+    not.
 
     Splits: every fourth image (index :math:`i \equiv 0 \bmod 4`, 450) is
     :obj:`'test'`, the others (1347) are :obj:`'train'`.
@@ -104,10 +111,8 @@ class SphereDigits(Dataset):
             :obj:`'so3'`. (default: :obj:`'none'`)
         seed (int, optional): Seed of the rotations. (default: :obj:`0`)
         radii (Sequence[float], optional): Disc radius of every level (the
-            paper's 0.3, 0.45, 0.8 on the unit sphere).
+            paper's 0.3, 0.45, 0.8 on the unit sphere; at most 4 levels).
             (default: :obj:`(0.3, 0.45, 0.8)`)
-        ratios (Sequence[float], optional): Fraction of the vertices kept on
-            levels 1, 2, ... (default: :obj:`(0.25, 0.0625)`)
         rings (int, optional): Rings of the radial profiles.
             (default: :obj:`6`)
         max_order (int, optional): Highest rotation order precomputed.
@@ -131,8 +136,7 @@ class SphereDigits(Dataset):
     """
     def __init__(self, split: str = 'train', rotate: str = 'none',
                  seed: int = 0,
-                 radii: Sequence[float] = (0.3, 0.45, 0.8),
-                 ratios: Sequence[float] = (0.25, 0.0625), rings: int = 6,
+                 radii: Sequence[float] = (0.3, 0.45, 0.8), rings: int = 6,
                  max_order: int = 1, method: str = 'fast',
                  limit: Optional[int] = None,
                  dtype: torch.dtype = torch.float32,
@@ -142,11 +146,12 @@ class SphereDigits(Dataset):
         self.rotate = check_choice(rotate, 'rotate', ROTATIONS)
         self.seed = check_positive_int(seed, 'seed', 0)
         radii = [float(r) for r in radii]
-        if len(radii) != len(ratios) + 1:
-            raise ValueError(f"'radii' needs one entry per level, i.e. one "
-                             f"more than 'ratios' ({len(ratios)}), got "
+        if not 2 <= len(radii) <= SUBDIVISIONS + 1:
+            raise ValueError(f"'radii' needs one entry per level, 2 to "
+                             f"{SUBDIVISIONS + 1} levels (icospheres of "
+                             f"subdivision {SUBDIVISIONS} down to 0), got "
                              f"{len(radii)}")
-        self.radii, self.ratios = radii, [float(r) for r in ratios]
+        self.radii = radii
         self.rings = check_positive_int(rings, 'rings')
         self.max_order = check_positive_int(max_order, 'max_order', 0)
         self.method = method
@@ -173,7 +178,7 @@ class SphereDigits(Dataset):
 
     def build_mesh(self) -> IntrinsicData:
         import trimesh
-        sphere = trimesh.creation.icosphere(subdivisions=3)
+        sphere = trimesh.creation.icosphere(subdivisions=SUBDIVISIONS)
         pos = torch.from_numpy(np.asarray(sphere.vertices)).double()
         pos = pos / pos.norm(dim=1, keepdim=True)
         pos = pos @ pole_rotation(pos[0]).t()  # vertex 0 at the pole
@@ -182,8 +187,13 @@ class SphereDigits(Dataset):
             face=torch.from_numpy(np.asarray(sphere.faces)).long().t()
             .contiguous())
         data = LogMap(self.radii[0], self.method)(data)
-        data = MultiscaleSupports(self.ratios, self.radii[1:],
-                                  self.method)(data)
+        # the coarser icospheres' vertices come first: 10 * 4^s + 2
+        sizes = [10 * 4 ** (SUBDIVISIONS - level) + 2
+                 for level in range(1, len(self.radii))]
+        data = MultiscaleSupports(
+            [size / pos.size(0) for size in sizes], self.radii[1:],
+            self.method,
+            samples=[torch.arange(size) for size in sizes])(data)
         data = HarmonicPrecompute(self.rings, self.max_order)(data)
         complex_dtype = (torch.complex64 if self.dtype == torch.float32
                          else torch.complex128)

@@ -12,8 +12,8 @@ turn the digit about the axis through the image centre by a uniform random
 angle (fixed per example). The network is the paper's: Conv8, Conv8, Pool,
 Conv16, Conv16, Pool, Conv32, Conv32, Conv10 (HSNConvClassification),
 supports 0.3 / 0.45 / 0.8 on the unit sphere, levels of 642 / 162 / 42
-vertices (nested icospheres), 6 rings, 'fast' log maps, global mean of the magnitudes. The
-first --train-size images of the training split (every image whose index
+vertices (nested icospheres), 6 rings, 'fast' log maps, global mean of
+the magnitudes. The first --train-size images of the training split (every image whose index
 is not a multiple of 4), all 450 of the test split; Adam with a cosine
 schedule to lr / 100 (--lr 1e-2), gradients clipped to norm 1 and steps
 with a non-finite gradient skipped (counted in the JSON), batch 32,
@@ -27,7 +27,8 @@ the turned test set, and the agreement of its predictions on the same
 test digit upright and turned is recorded (1 for an exactly invariant
 network). A third test set turns the digits by multiples of 72 degrees,
 which map the icosphere onto itself (only the pooling cells of points
-equidistant from two coarse vertices, decided by index, do not follow): accuracy there against the turned set separates the mesh's
+equidistant from two coarse vertices, decided by index, do not follow):
+accuracy there against the turned set separates the mesh's
 discretisation from the network.
 
 Usage: python benchmarks/sphere_digits.py [--epochs 8] [--train-size 600]

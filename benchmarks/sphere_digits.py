@@ -13,8 +13,9 @@ angle (fixed per example). The network is the paper's: Conv8, Conv8, Pool,
 Conv16, Conv16, Pool, Conv32, Conv32, Conv10 (HSNConvClassification),
 supports 0.3 / 0.45 / 0.8 on the unit sphere, levels of 642 / 162 / 42
 vertices (nested icospheres), 6 rings, 'fast' log maps, global mean of
-the magnitudes. The first --train-size images of the training split (every image whose index
-is not a multiple of 4), all 450 of the test split; Adam with a cosine
+the magnitudes. The first --train-size images of the training split
+(every image whose index is not a multiple of 4), all 450 of the test
+split; Adam with a cosine
 schedule to lr / 100 (--lr 1e-2), gradients clipped to norm 1 and steps
 with a non-finite gradient skipped (counted in the JSON), batch 32,
 C-ReLU biases of the hidden layers kept <= 0 after every step (with a

@@ -32,7 +32,7 @@ equidistant from two coarse vertices, decided by index, do not follow):
 accuracy there against the turned set separates the mesh's
 discretisation from the network.
 
-Usage: python benchmarks/sphere_digits.py [--epochs 8] [--train-size 600]
+Usage: python benchmarks/sphere_digits.py [--epochs 16] [--train-size 1000]
        [--quick]
 Writes benchmarks/results/sphere_digits.json and .png.
 """
@@ -151,8 +151,8 @@ def train(model, dataset, tests, epochs, lr, batch_size, seed):
 
 def main():
     parser = argparse.ArgumentParser()
-    parser.add_argument('--epochs', type=int, default=8)
-    parser.add_argument('--train-size', type=int, default=600)
+    parser.add_argument('--epochs', type=int, default=16)
+    parser.add_argument('--train-size', type=int, default=1000)
     parser.add_argument('--lr', type=float, default=1e-2)
     parser.add_argument('--batch-size', type=int, default=32)
     parser.add_argument('--threads', type=int, default=2)

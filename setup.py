@@ -27,6 +27,8 @@ extras_require = {
         'OpenEXR>=3.2',
         # ScanObjectNN's HDF5 files (tests/datasets)
         'h5py>=3.8',
+        # SphereDigits' 8x8 digits (bundled in the wheel, no download)
+        'scikit-learn>=1.2',
     ],
     # log_map(method='vector_heat'): geometry-central's vector heat method.
     'heat': ['potpourri3d>=1.0'],
@@ -41,6 +43,8 @@ extras_require = {
     # The external renderer of the SVBRDF oracle test and benchmark
     # (its llvm variant also needs: apt-get install libllvm19).
     'mitsuba': ['mitsuba>=3.5'],
+    # SphereDigits: scikit-learn's bundled 8x8 digits.
+    'digits': ['scikit-learn>=1.2'],
 }
 
 setup(

@@ -986,7 +986,6 @@ def svbrdf_model_error(d, results):
              'the true parameters', 'svbrdf_model_error.py', result)]
 
 
-
 def rank_correlation(x: Sequence[float], y: Sequence[float]) -> float:
     """Spearman's rho (Pearson of the ranks; ties broken by order)."""
     def ranks(values):
@@ -1181,6 +1180,56 @@ def hsn_correspondence(d, _):
               f"{pct(ref['exact'], 1)} exact")
     return [('HSN U-ResNet correspondence vs a non-equivariant baseline '
              '(SyntheticCorrespondence)', 'hsn_correspondence.py', result)]
+
+
+@rows_for('sphere_digits')
+def sphere_digits(d, _):
+    parts = []
+    for training in ('upright', 'turned'):
+        runs = [r for r in d['runs'] if r['training'] == training]
+        two = max(runs, key=lambda r: r['max_order'])
+        one = min(runs, key=lambda r: r['max_order'])
+        parts.append(
+            f"trained {training}: **turned test {pct(two['test_turned'], 1)}"
+            f" vs {pct(one['test_turned'], 1)}** (upright "
+            f"{pct(two['test_upright'], 1)} vs {pct(one['test_upright'], 1)}"
+            f", turned by fifths of a circle {pct(two['test_turned72'], 1)} "
+            f"vs {pct(one['test_turned72'], 1)}; same class upright and "
+            f"turned {pct(two['agreement_upright_turned'], 0)} vs "
+            f"{pct(one['agreement_upright_turned'], 0)})")
+    two = max(d['runs'], key=lambda r: r['max_order'])
+    one = min(d['runs'], key=lambda r: r['max_order'])
+    minutes = [r['seconds'] / 60 for r in d['runs']]
+    quick = ' (quick smoke run)' if d.get('quick') else ''
+    result = (f"{d['protocol']}; {d['train_size']} training / "
+              f"{d['test_size']} test digits, {d['epochs']} epochs, one "
+              f"seed{quick}; two streams vs one stream ("
+              f"{two['parameters'] / 1e3:.0f}k vs "
+              f"{one['parameters'] / 1e3:.0f}k parameters): "
+              + '; '.join(parts) + f"; {span(minutes, f1)} min per run on "
+              f"{d['machine']['cpu_count']} CPU cores")
+    return [('HSN on digits turned on a sphere (thesis Table 2.3), two '
+             'streams vs one', 'sphere_digits.py', result)]
+
+
+@rows_for('perona_malik')
+def perona_malik(d, _):
+    runs = d['runs']
+    delta = runs[0]
+    others = ', '.join(f"{r['model'].split(' (')[0]} {r['test_rel_l2']:.2f}"
+                       for r in runs[1:])
+    sizes = [r['parameters'] / 1e3 for r in runs]
+    quick = ' (quick smoke run)' if d.get('quick') else ''
+    result = (f"{d['protocol']}; {d['train_surfaces']} training / "
+              f"{d['test_surfaces']} test surfaces, {d['epochs']} epochs, "
+              f"one seed{quick}; test error relative to the input's "
+              f"(1 = identity): **DeltaConv {delta['test_rel_l2']:.2f}** vs "
+              f"{others} ({span(sizes, f1)}k parameters each); "
+              f"{span([r['seconds'] / 60 for r in runs], f1)} min per run "
+              f"on {d['machine']['cpu_count']} CPU cores")
+    return [('learning Perona-Malik diffusion (DeltaConv thesis Fig. 3.2): '
+             'anisotropic vs isotropic convolutions', 'perona_malik.py',
+             result)]
 
 
 # ------------------------------------------------------------------ table

@@ -172,3 +172,26 @@ def test_the_correspondence_row_follows_its_curves(copies):
     changed = [line for line in after.split('\n')
                if line not in before.split('\n')]
     assert len(changed) == 1 and '**98.7% within 0.05**' in changed[0]
+
+
+def test_sphere_digits_and_perona_malik_rows_follow_their_numbers(copies):
+    results, _ = copies
+    before = report.build_table(str(results))
+
+    def worse_turned(data):
+        run = data['runs'][0]
+        assert (run['training'], run['max_order']) == ('upright', 1)
+        run['test_turned'] = 0.123
+
+    def better_delta(data):
+        assert data['runs'][0]['model'].startswith('DeltaConv')
+        data['runs'][0]['test_rel_l2'] = 0.0456
+
+    edit(results / 'sphere_digits.json', worse_turned)
+    edit(results / 'perona_malik.json', better_delta)
+    after = report.build_table(str(results))
+    changed = [line for line in after.split('\n')
+               if line not in before.split('\n')]
+    assert len(changed) == 2
+    assert 'trained upright: **turned test 12.3% vs' in changed[0]
+    assert '**DeltaConv 0.05** vs' in changed[1]

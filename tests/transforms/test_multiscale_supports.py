@@ -163,3 +163,27 @@ def test_bad_values_are_named():
         MultiscaleSupports([0.25], [0.4], level0_radius=0)
     with pytest.raises(ValueError, match="'max_neighbors' must be at least"):
         MultiscaleSupports([0.25], [0.4], max_neighbors=0)
+
+
+def test_given_samples_replace_farthest_point_sampling():
+    data = LogMap(0.2)(sphere_data(3))
+    n = data.num_nodes
+    first = torch.arange(0, n, 3)
+    second = torch.arange(0, first.numel(), 4)
+    out = MultiscaleSupports([0.3, 0.1], [0.4, 0.8],
+                             samples=[first, second])(data)
+    assert torch.equal(out.sample_index_1, first)
+    assert torch.equal(out.pos_1, data.pos[first])
+    assert torch.equal(out.pos_2, data.pos[first[second]])
+    # cells as with sampled points: the nearest sample along the discs
+    assert torch.equal(out.cluster_1, nearest_sample_along(
+        data.edge_index, data.logmap[:, 0], first, n))
+    assert 'samples=[' in repr(MultiscaleSupports([0.3], [0.4],
+                                                  samples=[first]))
+    with pytest.raises(ValueError, match="one non-empty, increasing"):
+        MultiscaleSupports([0.3], [0.4], samples=[first.flip(0)])
+    with pytest.raises(ValueError, match="one non-empty, increasing"):
+        MultiscaleSupports([0.3], [0.4], samples=[first, second])
+    with pytest.raises(ValueError, match="index past the"):
+        MultiscaleSupports([0.3], [0.4],
+                           samples=[torch.tensor([0, n])])(data)

@@ -25,6 +25,8 @@ r"""Offline, deterministic datasets of curved surfaces (no downloads).
 * :class:`SyntheticCorrespondence`: one template mesh in many
   near-isometric poses (dense correspondence, FAUST-style), with
   :func:`correspondence_accuracy`.
+* :class:`SphereDigits`: scikit-learn's 8 x 8 digits on an icosphere,
+  upright or rotated (HSN's rotated MNIST on a sphere).
 """
 from .synthetic_shrec import SyntheticSHREC
 from .synthetic_modelnet import SyntheticModelNet
@@ -39,6 +41,7 @@ from .surfaces import bumpy_torus
 from .synthetic_parts import SyntheticShapeParts
 from .synthetic_correspondence import (SyntheticCorrespondence,
                                        correspondence_accuracy)
+from .sphere_digits import SphereDigits
 
 __all__ = [
     'SyntheticSHREC',
@@ -55,4 +58,5 @@ __all__ = [
     'SyntheticShapeParts',
     'SyntheticCorrespondence',
     'correspondence_accuracy',
+    'SphereDigits',
 ]

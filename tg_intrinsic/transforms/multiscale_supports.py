@@ -59,6 +59,11 @@ class MultiscaleSupports(BaseTransform):
             :class:`LogMap` has not run. (default: :obj:`None`)
         max_neighbors (int, optional): Cap on every disc.
             (default: :obj:`None`)
+        samples (Sequence[Tensor], optional): The samples of every level
+            as indices into the points of the level before (sorted, no
+            repeats), instead of farthest point sampling; e.g. the vertices
+            of the coarser icospheres, which an icosphere lists first.
+            :obj:`ratios` is not used then. (default: :obj:`None`)
         max_memory (float, optional): Memory limit in bytes of every
             level's discs, checked before each is built: level 0 as in
             :class:`LogMap`; level :math:`l` marches from its samples over
@@ -71,8 +76,20 @@ class MultiscaleSupports(BaseTransform):
     def __init__(self, ratios: Sequence[float], radii: Sequence[float],
                  method: str = 'fast', level0_radius: Optional[float] = None,
                  max_neighbors: Optional[int] = None,
-                 max_memory: Optional[float] = MAX_DISC_MEMORY):
+                 max_memory: Optional[float] = MAX_DISC_MEMORY,
+                 samples: Optional[Sequence[torch.Tensor]] = None):
         ratios, radii = list(ratios), list(radii)
+        if samples is not None:
+            samples = list(samples)
+            if len(samples) != len(radii) or not all(
+                    isinstance(s, torch.Tensor) and s.dim() == 1
+                    and s.numel() > 0 and not s.is_floating_point()
+                    and bool((s[1:] > s[:-1]).all()) and int(s.min()) >= 0
+                    for s in samples):
+                raise ValueError("'samples' must hold one non-empty, "
+                                 "increasing 1-D index tensor per level "
+                                 "(indices into the level before)")
+        self.samples = samples
         if len(ratios) != len(radii) or not ratios:
             raise ValueError("'ratios' and 'radii' must be non-empty and of "
                              "equal length (one entry per pooling level)")
@@ -119,9 +136,16 @@ class MultiscaleSupports(BaseTransform):
                                              start=1):
             n_prev = ids.numel()
             n_next = max(1, int(round(ratio * num)))
-            sample = fps(pos[ids], ratio=min(1.0, n_next / n_prev),
-                         random_start=False)
-            sample = torch.sort(sample).values
+            if self.samples is not None:
+                sample = self.samples[level - 1].to(pos.device)
+                if int(sample.max()) >= n_prev:
+                    raise ValueError(f"'samples' of level {level} index "
+                                     f"past the {n_prev} points of level "
+                                     f"{level - 1}")
+            else:
+                sample = fps(pos[ids], ratio=min(1.0, n_next / n_prev),
+                             random_start=False)
+                sample = torch.sort(sample).values
             cell, _ = graph_voronoi(pos[ids], graph, sample,
                                     edge_length=length)
             coarse = ids[sample]
@@ -168,6 +192,8 @@ class MultiscaleSupports(BaseTransform):
     def __repr__(self) -> str:
         memory = ('' if self.max_memory == MAX_DISC_MEMORY
                   else f', max_memory={self.max_memory}')
+        if self.samples is not None:
+            memory += (f', samples={[int(s.numel()) for s in self.samples]}')
         return (f'{self.__class__.__name__}(ratios={self.ratios}, '
                 f'radii={self.radii}, method={self.method!r}, '
                 f'level0_radius={self.level0_radius}, '

@@ -11,6 +11,7 @@ from torch_geometric.data import InMemoryDataset
 from tqdm.auto import tqdm
 
 from tg_intrinsic.data import IntrinsicData
+from tg_intrinsic.geometry.checks import check_positive_int
 
 
 def processing_suffix(pre_transform, pre_filter) -> str:
@@ -65,6 +66,25 @@ def check_task(task, **segmentation_options):
 
 def check_split(split, splits=('train', 'test')):
     return check_option(split, 'split', splits)
+
+
+def check_split_counts(counts, name):
+    """A pair (train, test) of positive shape counts."""
+    try:
+        train, test = counts
+    except (TypeError, ValueError):
+        raise ValueError(f"'{name}' must be a pair (train, test), got "
+                         f"{counts!r}") from None
+    return (check_positive_int(train, f'{name}[0]', 1),
+            check_positive_int(test, f'{name}[1]', 1))
+
+
+def check_fraction(value, name) -> float:
+    """A number in [0, 1]."""
+    value = float(value)
+    if not 0.0 <= value <= 1.0:
+        raise ValueError(f"'{name}' must be in [0, 1], got {value}")
+    return value
 
 
 def fmt(value):

@@ -10,7 +10,8 @@ from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.geometry.pointcloud.neighbors import fps
 
 from . import modelnet_shapes as shapes
-from .common import GeneratedDataset, check_split, fmt, save_atomic, shape_rng
+from .common import (GeneratedDataset, check_fraction, check_split,
+                     check_split_counts, fmt, save_atomic, shape_rng)
 
 
 class SyntheticModelNet(GeneratedDataset):
@@ -112,19 +113,10 @@ class SyntheticModelNet(GeneratedDataset):
     ):
         self.split = check_split(split)
         self.num_points = check_positive_int(num_points, 'num_points', 1)
-        try:
-            ntr, nte = num_per_class
-        except (TypeError, ValueError):
-            raise ValueError(f"'num_per_class' must be a pair (train, test), "
-                             f"got {num_per_class!r}") from None
-        self.num_per_class = (check_positive_int(ntr, 'num_per_class[0]', 1),
-                              check_positive_int(nte, 'num_per_class[1]', 1))
+        self.num_per_class = check_split_counts(num_per_class,
+                                                'num_per_class')
         self.oversample = check_positive_int(oversample, 'oversample', 1)
-        scale_jitter = float(scale_jitter)
-        if not 0.0 <= scale_jitter <= 1.0:
-            raise ValueError(f"'scale_jitter' must be in [0, 1], got "
-                             f"{scale_jitter}")
-        self.scale_jitter = scale_jitter
+        self.scale_jitter = check_fraction(scale_jitter, 'scale_jitter')
         self.rotate_up = bool(rotate_up)
         self.seed = check_positive_int(seed, 'seed', 0)
         super().__init__(root, transform, pre_transform, pre_filter, log=log,

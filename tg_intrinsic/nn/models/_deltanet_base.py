@@ -4,7 +4,8 @@ import torch
 from torch import Tensor
 from torch_geometric.data import Data
 
-from tg_intrinsic.geometry.checks import check_channels, check_positive_int
+from tg_intrinsic.geometry.checks import (check_channels, check_index,
+                                          check_positive_int, check_tensor)
 from tg_intrinsic.geometry.pointcloud.mls import build_mls_operators
 from tg_intrinsic.geometry.pointcloud.operators import SurfaceOperators
 from tg_intrinsic.nn.delta_conv import DeltaConv
@@ -85,3 +86,26 @@ class DeltaNetBase(torch.nn.Module):
                         else None)
             out.append(x)
         return out
+
+
+def category_one_hot(category: Optional[Tensor], num_categories: int,
+                     size: int, x: Tensor) -> Tensor:
+    """``data.category`` of a segmentation model built with
+    ``num_categories``: indices :math:`(B)` or one-hot :math:`(B, n)`, as
+    one-hot; one_hot and the embedding fail obscurely on wrong indices or
+    widths, so both are checked."""
+    n = num_categories
+    if category is None:
+        raise ValueError(f"this model was built with num_categories={n}; "
+                         f"it needs 'data.category'")
+    category = check_tensor(category, 'data.category')
+    if category.dim() == 1 and category.numel() == size:
+        category = check_index(category, 'data.category', n, x,
+                               what=f'categories (num_categories={n})')
+        return torch.nn.functional.one_hot(category, n)
+    if tuple(category.shape) != (size, n):
+        raise ValueError(f"'data.category' must hold a category index per "
+                         f"example [B] = [{size}] or one-hot vectors "
+                         f"[B, num_categories] = [{size}, {n}], got "
+                         f"{list(category.shape)}")
+    return category

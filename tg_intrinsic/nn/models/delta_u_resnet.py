@@ -5,10 +5,10 @@ from torch import Tensor
 from torch_geometric.data import Data
 from torch_geometric.utils import scatter
 
-from tg_intrinsic.geometry.checks import (check_index, check_positive_int,
-                                          check_tensor)
+from tg_intrinsic.geometry.checks import check_positive_int, check_tensor
 from tg_intrinsic.geometry.pointcloud.operators import SurfaceOperators
 from tg_intrinsic.nn.delta_conv import DeltaConv, scalar_mlp
+from tg_intrinsic.nn.models._deltanet_base import category_one_hot
 from tg_intrinsic.nn.vector_linear import VectorLinear
 from tg_intrinsic.pool.gravo_pool import GravoPool
 from tg_intrinsic.pool.gravo_unpool import GravoUnpool
@@ -219,8 +219,8 @@ class DeltaUResNet(torch.nn.Module):
                 batch = torch.zeros(x.size(0), dtype=torch.long,
                                     device=x.device)
             size = int(batch.max()) + 1
-            category = self._one_hot(getattr(data, 'category', None), size,
-                                     x)
+            category = category_one_hot(getattr(data, 'category', None),
+                                        self.num_categories, size, x)
             x = torch.cat([x, self.category(category.to(x.dtype))[batch]],
                           1)
         return self.head(x)
@@ -269,25 +269,6 @@ class DeltaUResNet(torch.nn.Module):
                              f"{self.pooling!r}; build them with "
                              f"PoolingLevels(method={self.pooling!r})")
         return [_Level(data, level) for level in range(NUM_SCALES)]
-
-    def _one_hot(self, category: Optional[Tensor], size: int,
-                 x: Tensor) -> Tensor:
-        if category is None:
-            raise ValueError("this model was built with num_categories="
-                             f"{self.num_categories}; it needs "
-                             "'data.category'")
-        category = check_tensor(category, 'data.category')
-        n = self.num_categories
-        if category.dim() == 1 and category.numel() == size:
-            category = check_index(category, 'data.category', n, x,
-                                   what=f'categories (num_categories={n})')
-            return torch.nn.functional.one_hot(category, n)
-        if tuple(category.shape) != (size, n):
-            raise ValueError(f"'data.category' must hold a category index "
-                             f"per example [B] = [{size}] or one-hot vectors "
-                             f"[B, num_categories] = [{size}, {n}], got "
-                             f"{list(category.shape)}")
-        return category
 
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}({self.in_channels}, '

@@ -4,11 +4,11 @@ import torch
 from torch import Tensor
 from torch_geometric.data import Data
 
-from tg_intrinsic.geometry.checks import (check_index, check_positive_int,
-                                          check_tensor)
+from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.nn.delta_conv import scalar_mlp
 from tg_intrinsic.pool.global_max_pool import global_max_pool
-from tg_intrinsic.nn.models._deltanet_base import DeltaNetBase
+from tg_intrinsic.nn.models._deltanet_base import (DeltaNetBase,
+                                                   category_one_hot)
 
 
 class DeltaNetSegmentation(torch.nn.Module):
@@ -100,29 +100,10 @@ class DeltaNetSegmentation(torch.nn.Module):
         size = int(batch.max()) + 1
         parts = [global_max_pool(x, batch, size)[batch]]
         if self.category is not None:
-            category = getattr(data, 'category', None)
-            if category is None:
-                raise ValueError("this model was built with num_categories="
-                                 f"{self.num_categories}; it needs "
-                                 "'data.category'")
-            category = self._one_hot(category, size, x)
+            category = category_one_hot(getattr(data, 'category', None),
+                                        self.num_categories, size, x)
             parts.append(self.category(category.to(x.dtype))[batch])
         return self.head(torch.cat(parts + conv_out, dim=1))
-
-    def _one_hot(self, category: Tensor, size: int, x: Tensor) -> Tensor:
-        # one_hot and the embedding fail obscurely on wrong indices/widths.
-        category = check_tensor(category, 'data.category')
-        n = self.num_categories
-        if category.dim() == 1 and category.numel() == size:
-            category = check_index(category, 'data.category', n, x,
-                                   what=f'categories (num_categories={n})')
-            return torch.nn.functional.one_hot(category, n)
-        if tuple(category.shape) != (size, n):
-            raise ValueError(f"'data.category' must hold a category index "
-                             f"per example [B] = [{size}] or one-hot vectors "
-                             f"[B, num_categories] = [{size}, {n}], got "
-                             f"{list(category.shape)}")
-        return category
 
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}({self.in_channels}, '

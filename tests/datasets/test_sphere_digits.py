@@ -70,6 +70,30 @@ def test_rotation_about_the_axis_turns_the_digit_in_place(upright):
                           upright[2].x[nearest.indices, 0], atol=1e-12)
 
 
+def test_pooling_cells_permute_with_a_fifth_turn(upright):
+    """A turn by 72 degrees maps the nested icospheres onto themselves;
+    every pooling cell must map onto the cell of the turned points, and
+    its nearest coarse vertex must be a nearest one (on the sphere)."""
+    turn = rotation_about_z(2 * math.pi / 5)
+    mesh = upright.mesh
+    ids = torch.arange(mesh.num_nodes)
+    for level in (1, 2):
+        coarse = ids[mesh[f'sample_index_{level}']]
+        fine_pos, coarse_pos = mesh.pos[ids], mesh.pos[coarse]
+        fine_map = torch.cdist(fine_pos @ turn.t(), fine_pos).argmin(1)
+        coarse_map = torch.cdist(coarse_pos @ turn.t(), coarse_pos).argmin(1)
+        cell = mesh[f'cluster_{level}']
+        assert torch.equal(cell[fine_map], coarse_map[cell])
+        angle = torch.arccos((fine_pos @ coarse_pos.t()).clamp(-1, 1))
+        chosen = angle.gather(1, cell[:, None])[:, 0]
+        assert torch.allclose(chosen, angle.min(1).values, atol=1e-9)
+        # ties are common: a rule by index would break the symmetry
+        ties = (angle <= angle.min(1, keepdim=True).values + 1e-9).sum(1)
+        assert int((ties > 1).sum()) > coarse.numel()
+        assert torch.allclose(mesh[f'area_{level}'].sum(), mesh.area.sum())
+        ids = coarse
+
+
 def test_so3_rotations_move_the_digit():
     data = SphereDigits('test', rotate='so3', limit=3)
     rot = data.rotation(1)

@@ -7,6 +7,7 @@ import torch
 from torch_geometric.data import Dataset
 
 from tg_intrinsic.data import IntrinsicData
+from tg_intrinsic.geometry import log_map
 from tg_intrinsic.geometry.checks import check_choice, check_positive_int
 from tg_intrinsic.geometry.sphere_images import sample_image_on_sphere
 from tg_intrinsic.transforms import (HarmonicPrecompute, LogMap,
@@ -48,6 +49,46 @@ def random_rotation(rng: np.random.Generator,
     if np.linalg.det(q) < 0:
         q[:, 0] = -q[:, 0]
     return torch.from_numpy(q).to(dtype)
+
+
+def covariant_clusters(data: IntrinsicData, levels: int,
+                       method: str) -> IntrinsicData:
+    """Pooling cells of the nested icospheres that turns about the pole
+    permute like the vertices. Each fine point joins its nearest coarse
+    vertex on the sphere; the graph Voronoi cells of
+    :class:`MultiscaleSupports` break the exact ties of edge midpoints
+    (equidistant from two coarse vertices, about 480 of 642 points) by
+    index, which no turn respects. Here a tie goes to the candidate
+    furthest counter-clockwise about the pole as seen from the point,
+    then to the one nearer the pole: rules that turns about the pole keep.
+    Rewrites ``cluster_l``, ``pool_transport_l`` and ``area_l``."""
+    pos, frame = data.pos.double(), data.frame
+    ids = torch.arange(pos.size(0))
+    area = data.area
+    for level in range(1, levels + 1):
+        coarse = ids[data[f'sample_index_{level}']]
+        fine, centre = pos[ids], pos[coarse]
+        angle = torch.arccos((fine @ centre.t()).clamp(-1, 1))
+        tied = angle <= angle.min(1, keepdim=True).values + 1e-9
+        azimuth = torch.atan2(pos[:, 1], pos[:, 0])
+        turn = torch.remainder(azimuth[coarse][None] - azimuth[ids][:, None]
+                               + math.pi, 2 * math.pi) - math.pi
+        on_axis = centre[:, :2].norm(dim=1) < 1e-9  # the pole: no azimuth
+        turn = torch.where(on_axis[None], 0.0, turn)
+        turn = torch.where(tied, turn, -math.inf)
+        tied &= turn >= turn.max(1, keepdim=True).values - 1e-9
+        height = torch.where(tied, centre[:, 2][None], -math.inf)
+        cell = height.argmax(1)
+        pairs = torch.stack([ids, coarse[cell]])
+        _, _, phi = log_map(pos, pairs, frame, data.face, method=method)
+        data[f'cluster_{level}'] = cell
+        data[f'pool_transport_{level}'] = torch.where(
+            pairs[0] == pairs[1], 0.0, phi).to(phi.dtype)
+        area = torch.zeros(coarse.numel(), dtype=area.dtype).index_add_(
+            0, cell, area)
+        data[f'area_{level}'] = area
+        ids = coarse
+    return data
 
 
 def pole_rotation(direction: torch.Tensor) -> torch.Tensor:
@@ -194,6 +235,7 @@ class SphereDigits(Dataset):
             [size / pos.size(0) for size in sizes], self.radii[1:],
             self.method,
             samples=[torch.arange(size) for size in sizes])(data)
+        data = covariant_clusters(data, len(sizes), self.method)
         data = HarmonicPrecompute(self.rings, self.max_order)(data)
         complex_dtype = (torch.complex64 if self.dtype == torch.float32
                          else torch.complex128)

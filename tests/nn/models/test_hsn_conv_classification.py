@@ -77,10 +77,7 @@ def test_turning_the_digit_about_the_axis_keeps_the_logits(digits,
     vertices whose discs are the same up to a gauge change. Every harmonic
     layer and the magnitudes at the global pool see the same thing, so the
     logits of a one-level network agree to rounding, for one stream (its
-    filters are isotropic) and two (equivariant order-1 stream). Pooling
-    breaks the exact symmetry (farthest point sampling picks its samples
-    by index), so for the paper's three-level network this holds only
-    approximately; the benchmark measures it on trained networks."""
+    filters are isotropic) and two (equivariant order-1 stream)."""
     from tg_intrinsic.datasets.sphere_digits import rotation_about_z
     torch.manual_seed(0)
     model = HSNConvClassification(1, 10, channels=(4, ), max_order=max_order,
@@ -96,20 +93,21 @@ def test_turning_the_digit_about_the_axis_keeps_the_logits(digits,
 
 
 @pytest.mark.parametrize('max_order', [0, 1])
-def test_the_three_level_network_nearly_ignores_turns(digits, max_order):
-    """The paper's network on nested icosphere levels: turning a digit in
-    place changes its logits by a small fraction of how much they differ
-    between digits (the pooling cells of points equidistant from two
-    coarse vertices are decided by index, and other angles resample the
-    digit, so it is not exact)."""
+def test_the_three_level_network_ignores_turns(digits, max_order):
+    """The paper's network on nested icosphere levels whose pooling cells
+    turns about the pole permute like the vertices (covariant_clusters):
+    a turn by 72 degrees keeps the logits to rounding; other angles
+    resample the digit, which moves them by a small fraction of how much
+    they differ between digits (0.25% measured; with the cells of
+    MultiscaleSupports, which break ties by index, up to 30%)."""
     from tg_intrinsic.datasets.sphere_digits import rotation_about_z
     torch.manual_seed(0)
     model = HSNConvClassification(1, 10, max_order=max_order).double()
     model.eval()
     logits = torch.cat([model(digits[i]) for i in range(6)])
     spread = (logits - logits.mean(0)).norm(dim=1).mean()
-    for angle in (2 * math.pi / 5, 2.5):
+    for angle, bound in ((2 * math.pi / 5, 1e-9), (2.5, 0.01)):
         for i in range(2):
             turned = digits[i]
             turned.x = digits.signal(i, rotation_about_z(angle))
-            assert (model(turned) - logits[i]).norm() < 0.3 * spread
+            assert (model(turned) - logits[i]).norm() < bound * spread

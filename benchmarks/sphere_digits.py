@@ -27,10 +27,10 @@ x {upright, turned training set}; each is tested on the upright and on
 the turned test set, and the agreement of its predictions on the same
 test digit upright and turned is recorded (1 for an exactly invariant
 network). A third test set turns the digits by multiples of 72 degrees,
-which map the icosphere onto itself (only the pooling cells of points
-equidistant from two coarse vertices, decided by index, do not follow):
-accuracy there against the turned set separates the mesh's
-discretisation from the network.
+which map the icosphere and its pooling cells onto themselves
+(covariant_clusters): there a two-stream network is exactly invariant,
+so accuracy there against the turned set separates the resampling of the
+turned digit from the network.
 
 Usage: python benchmarks/sphere_digits.py [--epochs 16] [--train-size 1000]
        [--quick]
@@ -98,9 +98,8 @@ def accuracy(model, dataset):
 
 def turned_by_fifths(dataset, seed=2):
     """The digits turned by 72, 144, 216 or 288 degrees: turns that map
-    the icosphere's vertices onto each other (vertex 0 is at the pole), so
-    only the pooling levels (sampled by index) are not turned with the
-    digit. Separates discretisation from the network's invariance."""
+    the icosphere's vertices and pooling cells onto each other (vertex 0
+    is at the pole). Separates resampling from the network's invariance."""
     gen = torch.Generator().manual_seed(seed)
     fifths = torch.randint(1, 5, (len(dataset), ), generator=gen)
     dataset.signals = torch.stack([

@@ -140,7 +140,8 @@ class SphereDigits(Dataset):
     :class:`~tg_intrinsic.transforms.HarmonicPrecompute`. Nested icospheres
     keep every level symmetric under the icosahedron's rotations, e.g.
     turns by 72 degrees about the pole, where farthest point sampling would
-    not.
+    not, and :func:`covariant_clusters` makes the pooling cells follow
+    those turns too.
 
     Splits: every fourth image (index :math:`i \equiv 0 \bmod 4`, 450) is
     :obj:`'test'`, the others (1347) are :obj:`'train'`.

@@ -43,6 +43,31 @@ class GeneratedDataset(InMemoryDataset):
     def download(self):
         pass
 
+    def generate_splits(self, groups: int, counts, desc: str):
+        """Generates shape ``j`` of every group (class, category)
+        ``c < groups`` with ``self.generate(c, j)``, the first
+        ``counts[0]`` of a group for training and the next ``counts[1]``
+        for testing, applies the pre-filter and the pre-transform, and
+        saves the two splits to :attr:`processed_paths` atomically."""
+        train, test = counts
+        lists = ([], [])
+        with tqdm(total=groups * (train + test), desc=desc,
+                  disable=not self.log, unit='shape') as bar:
+            for c in range(groups):
+                for j in range(train + test):
+                    data = self.generate(c, j)
+                    bar.update(1)
+                    if self.pre_filter is not None and \
+                            not self.pre_filter(data):
+                        continue
+                    if self.pre_transform is not None:
+                        data = self.pre_transform(data)
+                    lists[0 if j < train else 1].append(data)
+        for data_list, path in zip(lists, self.processed_paths):
+            if len(data_list) == 0:
+                raise ValueError("'pre_filter' removed every shape of a split")
+            save_atomic(type(self), data_list, path)
+
 
 def check_option(value, name, options):
     if value not in options:

@@ -156,6 +156,7 @@ class Part:
 
     def __init__(self, kind, A, t, params=None):
         self.kind = kind
+        self.name = None  # the semantic part, where a builder names it
         self.A = np.asarray(A, float)
         self.t = np.asarray(t, float)
         self.params = params
@@ -247,6 +248,15 @@ def rot_z(a):
     return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
 
 
+def named(name, *parts):
+    """Gives ``parts`` the semantic part ``name`` (read by
+    :class:`~tg_intrinsic.datasets.SyntheticShapeParts`); returns them as a
+    list."""
+    for part in parts:
+        part.name = name
+    return list(parts)
+
+
 def _u(rng, lo, hi):
     return float(rng.uniform(lo, hi))
 
@@ -259,29 +269,31 @@ def airplane(rng):
     R = _u(rng, 0.09, 0.14)
     zs = np.array([0, 0.08, 0.25, 0.75, 0.95, 1.0]) * L
     rs = np.array([0, 0.6, 1.0, 1.0, 0.5, 0.15]) * R
-    parts = [lathe([-L / 2, 0, 0], zs, rs, axis=(1.0, 0, 0))]
+    parts = named('body', lathe([-L / 2, 0, 0], zs, rs, axis=(1.0, 0, 0)))
     span = _u(rng, 1.4, 2.2)
     chord = _u(rng, 0.22, 0.35)
     sweep = _u(rng, 0.0, 0.5)
     wx = _u(rng, -0.15, 0.1) * L
     wz = _u(rng, -0.6, 0.6) * R  # low or high wing
     for side in (-1, 1):
-        parts.append(box([wx - sweep * span / 4, side * span / 4, wz],
-                         [chord, span / 2, 0.035], yaw=side * sweep * 0.5))
+        parts += named('wing', box(
+            [wx - sweep * span / 4, side * span / 4, wz],
+            [chord, span / 2, 0.035], yaw=side * sweep * 0.5))
     # tail plane and fin
     ts = span * _u(rng, 0.25, 0.4)
-    parts.append(box([-0.42 * L, 0, R * 0.3], [chord * 0.6, ts, 0.03]))
+    parts += named('tail', box([-0.42 * L, 0, R * 0.3],
+                               [chord * 0.6, ts, 0.03]))
     fh = _u(rng, 0.18, 0.35)
-    parts.append(box([-0.42 * L, 0, R * 0.5 + fh / 2], [chord * 0.7, 0.03,
-                                                          fh]))
+    parts += named('tail', box([-0.42 * L, 0, R * 0.5 + fh / 2],
+                               [chord * 0.7, 0.03, fh]))
     n_eng = int(rng.choice([0, 2, 4]))
     for k in range(n_eng // 2):
         y = span * (0.15 + 0.15 * k)
         for side in (-1, 1):
             x0 = wx - sweep * y / 2 + chord * 0.6
-            parts.append(cylinder([x0, side * y, wz - 0.09],
-                                  [x0 - chord * 1.2, side * y, wz - 0.09],
-                                  0.06))
+            parts += named('engine', cylinder(
+                [x0, side * y, wz - 0.09],
+                [x0 - chord * 1.2, side * y, wz - 0.09], 0.06))
     return parts
 
 
@@ -356,32 +368,34 @@ def chair(rng):
     W, D = _u(rng, 0.4, 0.6), _u(rng, 0.4, 0.6)
     h = _u(rng, 0.4, 0.5)
     t = 0.05
-    parts = [box([0, 0, h], [W, D, t])]
+    parts = named('seat', box([0, 0, h], [W, D, t]))
     if rng.random() < 0.75:
         lr = _u(rng, 0.015, 0.03)
         for x in (-1, 1):
             for y in (-1, 1):
-                parts.append(cylinder([x * (W / 2 - 0.04), y * (D / 2 - 0.04),
-                                       0], [x * (W / 2 - 0.04),
-                                            y * (D / 2 - 0.04), h], lr))
+                parts += named('leg', cylinder(
+                    [x * (W / 2 - 0.04), y * (D / 2 - 0.04), 0],
+                    [x * (W / 2 - 0.04), y * (D / 2 - 0.04), h], lr))
     else:  # office chair: column and star base
-        parts.append(cylinder([0, 0, 0.08], [0, 0, h], 0.03))
+        parts += named('leg', cylinder([0, 0, 0.08], [0, 0, h], 0.03))
         for k in range(5):
             a = 2 * np.pi * k / 5
-            parts.append(box([0.15 * np.cos(a), 0.15 * np.sin(a), 0.06],
-                             [0.3, 0.04, 0.04], yaw=a))
+            parts += named('leg', box(
+                [0.15 * np.cos(a), 0.15 * np.sin(a), 0.06],
+                [0.3, 0.04, 0.04], yaw=a))
     bh = _u(rng, 0.35, 0.6)
     tilt = _u(rng, 0.0, 0.25)
     back = box([0, 0, 0], [W, 0.04, bh])
     back.A = rot_x(-tilt) @ back.A
     back.t = np.array([0, -D / 2 + 0.02 - np.sin(tilt) * bh / 2,
                        h + bh / 2 * np.cos(tilt)])
-    parts.append(back)
+    parts += named('back', back)
     if rng.random() < 0.4:  # armrests
         for x in (-1, 1):
-            parts.append(box([x * W / 2, 0, h + 0.2], [0.05, D * 0.9, 0.04]))
-            parts.append(box([x * W / 2, D / 2 - 0.06, h + 0.1],
-                             [0.04, 0.04, 0.2]))
+            parts += named('arm', box([x * W / 2, 0, h + 0.2],
+                                      [0.05, D * 0.9, 0.04]),
+                           box([x * W / 2, D / 2 - 0.06, h + 0.1],
+                               [0.04, 0.04, 0.2]))
     return parts
 
 
@@ -389,13 +403,14 @@ def cup(rng):
     R = _u(rng, 0.25, 0.4)
     H = _u(rng, 0.5, 0.9)
     th = _u(rng, 0.02, 0.04)
-    parts = [tube([0, 0, H / 2], R, R - th, H),
-             cylinder([0, 0, 0], [0, 0, th * 1.5], R - th * 0.5)]
+    parts = named('body', tube([0, 0, H / 2], R, R - th, H),
+                  cylinder([0, 0, 0], [0, 0, th * 1.5], R - th * 0.5))
     if rng.random() < 0.8:  # handle
         hr = _u(rng, 0.15, 0.25) * H
-        parts.append(torus([R + hr * 0.3, 0, H * _u(rng, 0.45, 0.6)], hr,
-                           _u(rng, 0.02, 0.04), np.pi * 1.2,
-                           R_axis=rot_x(np.pi / 2) @ rot_z(-0.6 * np.pi)))
+        parts += named('handle', torus(
+            [R + hr * 0.3, 0, H * _u(rng, 0.45, 0.6)], hr,
+            _u(rng, 0.02, 0.04), np.pi * 1.2,
+            R_axis=rot_x(np.pi / 2) @ rot_z(-0.6 * np.pi)))
     return parts
 
 
@@ -426,23 +441,23 @@ def guitar(rng):
 def lamp(rng):
     base_r = _u(rng, 0.15, 0.25)
     H = _u(rng, 0.7, 1.4)
-    parts = [cylinder([0, 0, 0], [0, 0, 0.05], base_r)]
+    parts = named('base', cylinder([0, 0, 0], [0, 0, 0.05], base_r))
     if rng.random() < 0.5:  # straight stem
         top = np.array([0, 0, H])
-        parts.append(cylinder([0, 0, 0.05], top, 0.02))
+        parts += named('tube', cylinder([0, 0, 0.05], top, 0.02))
     else:  # arm with an elbow
         elbow = np.array([0, 0, H * 0.6])
         top = elbow + np.array([_u(rng, 0.2, 0.4), 0, H * 0.4])
-        parts.append(cylinder([0, 0, 0.05], elbow, 0.02))
-        parts.append(cylinder(elbow, top, 0.02))
-        parts.append(ellipsoid(elbow, [0.035] * 3))
+        parts += named('tube', cylinder([0, 0, 0.05], elbow, 0.02),
+                       cylinder(elbow, top, 0.02),
+                       ellipsoid(elbow, [0.035] * 3))
     sr0, sr1 = _u(rng, 0.08, 0.15), _u(rng, 0.18, 0.35)
     sh = _u(rng, 0.15, 0.3)
     if rng.random() < 0.5:  # conical shade around the bulb
-        parts.append(lathe(top - np.array([0, 0, sh * 0.6]), [0, 0.005, sh],
-                           [sr1, sr1, sr0]))
+        parts += named('shade', lathe(top - np.array([0, 0, sh * 0.6]),
+                                      [0, 0.005, sh], [sr1, sr1, sr0]))
     else:  # globe
-        parts.append(ellipsoid(top, [sr1 * 0.8] * 3))
+        parts += named('shade', ellipsoid(top, [sr1 * 0.8] * 3))
     return parts
 
 
@@ -486,21 +501,23 @@ def table(rng):
     t = _u(rng, 0.03, 0.06)
     round_top = rng.random() < 0.35
     if round_top:
-        parts = [cylinder([0, 0, h - t], [0, 0, h], D / 2 * 1.1)]
+        parts = named('top', cylinder([0, 0, h - t], [0, 0, h], D / 2 * 1.1))
     else:
-        parts = [box([0, 0, h - t / 2], [W, D, t])]
+        parts = named('top', box([0, 0, h - t / 2], [W, D, t]))
     if round_top or rng.random() < 0.3:  # pedestal
-        parts.append(cylinder([0, 0, 0.03], [0, 0, h - t], 0.05))
-        parts.append(cylinder([0, 0, 0], [0, 0, 0.03], _u(rng, 0.2, 0.35)))
+        parts += named('leg', cylinder([0, 0, 0.03], [0, 0, h - t], 0.05))
+        parts += named('support', cylinder([0, 0, 0], [0, 0, 0.03],
+                                           _u(rng, 0.2, 0.35)))
     else:
         lw = _u(rng, 0.03, 0.07)
         x, y = (W if not round_top else D) / 2 - 0.06, D / 2 - 0.06
         for sx in (-1, 1):
             for sy in (-1, 1):
-                parts.append(box([sx * x, sy * y, (h - t) / 2],
-                                 [lw, lw, h - t]))
+                parts += named('leg', box([sx * x, sy * y, (h - t) / 2],
+                                          [lw, lw, h - t]))
         if rng.random() < 0.4:  # lower shelf
-            parts.append(box([0, 0, 0.15], [2 * x, 2 * y, 0.02]))
+            parts += named('support', box([0, 0, 0.15],
+                                          [2 * x, 2 * y, 0.02]))
     return parts
 
 

@@ -3,7 +3,6 @@ from typing import Callable, Optional, Tuple
 
 import numpy as np
 import torch
-from tqdm.auto import tqdm
 
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry.checks import check_positive_int
@@ -11,7 +10,36 @@ from tg_intrinsic.geometry.pointcloud.neighbors import fps
 
 from . import modelnet_shapes as shapes
 from .common import (GeneratedDataset, check_fraction, check_split,
-                     check_split_counts, fmt, save_atomic, shape_rng)
+                     check_split_counts, fmt, shape_rng)
+
+
+def sample_cloud(parts, num_points: int, oversample: int,
+                 scale_jitter: float, rng):
+    r"""A point cloud of the composed shape ``parts`` (primitives of
+    :mod:`.modelnet_shapes`): the parts stretched along x, y and z by
+    :math:`e^u`, :math:`u \sim U(-s, s)` with ``s = scale_jitter`` (in
+    place), ``oversample * num_points`` area-weighted samples of the
+    visible surface thinned to ``num_points`` by farthest point sampling,
+    centred on the bounding box and scaled into the unit ball. Returns the
+    points, their normals and the index of the part each lies on; the
+    parts are moved into the same coordinates."""
+    if scale_jitter > 0:
+        stretch = np.exp(rng.uniform(-scale_jitter, scale_jitter, 3))
+        for part in parts:
+            part.A = stretch[:, None] * part.A
+            part.t = stretch * part.t
+    dense = num_points * oversample
+    pts, nrm, fid = shapes.sample_surface(parts, dense, rng)
+    idx = fps(torch.from_numpy(pts), num_points / dense,
+              random_start=False)[:num_points].numpy()
+    pts, nrm = pts[idx], nrm[idx]
+    part_index = shapes.shape_mesh(parts)[2][fid[idx]]
+    centre = 0.5 * (pts.max(0) + pts.min(0))
+    scale = np.linalg.norm(pts - centre, axis=1).max()
+    for part in parts:
+        part.A = part.A / scale
+        part.t = (part.t - centre) / scale
+    return (pts - centre) / scale, nrm, part_index
 
 
 class SyntheticModelNet(GeneratedDataset):
@@ -141,43 +169,15 @@ class SyntheticModelNet(GeneratedDataset):
         return len(self.classes)
 
     def process(self):
-        ntr, nte = self.num_per_class
-        lists = ([], [])
-        total = len(self.classes) * (ntr + nte)
-        with tqdm(total=total, desc='Generating SyntheticModelNet',
-                  disable=not self.log, unit='shape') as bar:
-            for c, name in enumerate(self.classes):
-                for j in range(ntr + nte):
-                    data = self.generate(c, j)
-                    bar.update(1)
-                    if self.pre_filter is not None and \
-                            not self.pre_filter(data):
-                        continue
-                    if self.pre_transform is not None:
-                        data = self.pre_transform(data)
-                    lists[0 if j < ntr else 1].append(data)
-        for data_list, path in zip(lists, self.processed_paths):
-            if len(data_list) == 0:
-                raise ValueError("'pre_filter' removed every shape of a split")
-            save_atomic(type(self), data_list, path)
+        self.generate_splits(len(self.classes), self.num_per_class,
+                             'Generating SyntheticModelNet')
 
     def generate(self, c: int, j: int) -> IntrinsicData:
         """Generates shape ``j`` of class ``c`` (without transforms)."""
         rng = shape_rng(self.seed, c, j)
         parts = shapes.CLASSES[self.classes[c]](rng)
-        if self.scale_jitter > 0:
-            stretch = np.exp(rng.uniform(-self.scale_jitter,
-                                         self.scale_jitter, 3))
-            for part in parts:
-                part.A = stretch[:, None] * part.A
-                part.t = stretch * part.t
-        dense = self.num_points * self.oversample
-        pts, nrm, _ = shapes.sample_surface(parts, dense, rng)
-        idx = fps(torch.from_numpy(pts), self.num_points / dense,
-                  random_start=False)[:self.num_points].numpy()
-        pts, nrm = pts[idx], nrm[idx]
-        pts = pts - 0.5 * (pts.max(0) + pts.min(0))
-        pts /= np.linalg.norm(pts, axis=1).max()
+        pts, nrm, _ = sample_cloud(parts, self.num_points, self.oversample,
+                                   self.scale_jitter, rng)
         if self.rotate_up:
             a = rng.uniform(0, 2 * np.pi)
             R = np.array([[np.cos(a), -np.sin(a), 0],

@@ -106,15 +106,18 @@ def source_splits(args):
     """The train and test splits of ``args.dataset`` as stored (meshes or
     point clouds), before any preparation."""
     from tg_intrinsic.datasets import (SyntheticModelNet, SyntheticSHREC,
-                                       open_folder)
-    if args.dataset == 'synthetic_modelnet':
+                                       SyntheticShapeParts, open_folder)
+    # generated point clouds: the class and its (train, test) count option
+    clouds = {'synthetic_modelnet': (SyntheticModelNet, 'num_per_class'),
+              'synthetic_parts': (SyntheticShapeParts, 'num_per_category')}
+    if args.dataset in clouds:
+        cls, counts = clouds[args.dataset]
         kwargs = dict(num_points=args.num_points, seed=args.data_seed)
         if args.shapes_per_class is not None:
             half = max(1, args.shapes_per_class // 2)
-            kwargs['num_per_class'] = (half, half)
-        path = os.path.join(args.root, 'SyntheticModelNet')
-        return [SyntheticModelNet(path, split, **kwargs)
-                for split in ('train', 'test')]
+            kwargs[counts] = (half, half)
+        path = os.path.join(args.root, cls.__name__)
+        return [cls(path, split, **kwargs) for split in ('train', 'test')]
     if args.dataset == 'synthetic_shrec':
         kwargs = dict(seed=args.data_seed, task=args.task)
         if args.num_vertices is not None:
@@ -125,15 +128,6 @@ def source_splits(args):
                               1, args.shapes_per_class // 2))
         path = os.path.join(args.root, 'SyntheticSHREC')
         return [SyntheticSHREC(path, split, **kwargs)
-                for split in ('train', 'test')]
-    if args.dataset == 'synthetic_parts':
-        from tg_intrinsic.datasets import SyntheticShapeParts
-        kwargs = dict(num_points=args.num_points, seed=args.data_seed)
-        if args.shapes_per_class is not None:
-            half = max(1, args.shapes_per_class // 2)
-            kwargs['num_per_category'] = (half, half)
-        path = os.path.join(args.root, 'SyntheticShapeParts')
-        return [SyntheticShapeParts(path, split, **kwargs)
                 for split in ('train', 'test')]
     if args.mesh_root is None:
         raise ValueError("--dataset mesh_folder needs --mesh-root PATH")

@@ -7,7 +7,9 @@ from typing import Optional
 import torch
 from torch import Tensor
 
-from ..checks import check_choice, check_positive_float, check_positive_int
+from ..checks import (check_choice, check_points, check_positive_float,
+                      check_positive_int)
+from .mls import build_mls_operators
 from .operators import SurfaceOperators, vector_norm
 
 CONDUCTANCES = ('rational', 'exp', 'none')
@@ -111,9 +113,6 @@ def perona_malik(pos: Tensor, signal: Tensor, steps: int = 20,
     Returns:
         The diffused signal, shaped like ``signal``.
     """
-    from ..checks import check_points
-    from .mls import build_mls_operators
-
     pos = check_points(pos)
     steps = check_positive_int(steps, 'steps', minimum=0)
     kappa = check_positive_float(kappa, 'kappa')

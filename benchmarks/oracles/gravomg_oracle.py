@@ -18,7 +18,8 @@ out.npz: level sizes, the solution x of the full solve, hierarchy_time
 includes the original's Galerkin products and coarse factorisation),
 iterations (cycles to the tolerance; max_iter + 1 if never), and for the
 cycle counts in `cycles` the relative residual and the time of a solve
-with that max_iter (gravomg reports no iteration count: the script solves
+with that max_iter, base_mb and peak_mb (the resident set after loading
+the system and the peak after the timed solves, MB) (gravomg reports no iteration count: the script solves
 on the same prolongations with max_iter = 1, 2, 4, ... until the
 tolerance is met, then bisects). Writes the output atomically."""
 import os
@@ -27,6 +28,17 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
+
+
+def resident_mb():
+    with open('/proc/self/statm') as f:
+        pages = int(f.read().split()[1])
+    return pages * os.sysconf('SC_PAGE_SIZE') / 2 ** 20
+
+
+def peak_mb():
+    import resource
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def main(source, target):
@@ -43,6 +55,7 @@ def main(source, target):
     max_iter = int(data['max_iter']) if 'max_iter' in data else 100
     repeats = int(data['repeats']) if 'repeats' in data else 1
     options = dict(lower_bound=lower, tolerance=tol, stopping_criteria=0)
+    base_mb = resident_mb()
     if 'face' in data:
         neigh = gravomg.util.neighbors_from_faces(data['face'])
     else:
@@ -56,6 +69,7 @@ def main(source, target):
         start = time.perf_counter()
         x = np.asarray(solver.solve(A, b)).reshape(-1)
         solve_time = min(solve_time, time.perf_counter() - start)
+    peak = peak_mb()  # before the cycle counting below
     prolongations = solver.prolongation_matrices
     sizes = [n] + [P.shape[1] for P in prolongations]
 
@@ -109,7 +123,7 @@ def main(source, target):
              residuals=np.array([history[k][1] for k in ks]),
              times=np.array([history[k][0] for k in ks]),
              iterations=iterations, hierarchy_time=hierarchy_time,
-             solve_time=solve_time, **extra)
+             solve_time=solve_time, base_mb=base_mb, peak_mb=peak, **extra)
     os.replace(tmp, target)
 
 

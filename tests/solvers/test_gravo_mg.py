@@ -109,6 +109,36 @@ def test_second_solve_is_cached_and_identical():
     assert not solver.info.cached
 
 
+@pytest.mark.parametrize('neighbours', [6, 40])
+def test_galerkin_levels_equal_scipy_products(neighbours):
+    # 40 neighbours make coarse rows longer than the compiled product's
+    # first slots, so they take its second, wider pass.
+    rng = np.random.default_rng(3)
+    pos = rng.normal(size=(3000, 3))
+    from scipy.spatial import cKDTree
+    _, nbr = cKDTree(pos).query(pos, k=neighbours + 1)
+    rows = np.repeat(np.arange(pos.shape[0]), neighbours)
+    weights = sp.csr_matrix((rng.random(rows.size),
+                             (rows, nbr[:, 1:].reshape(-1))))
+    A = (weights + weights.T + sp.identity(pos.shape[0]) * neighbours)
+    A = A.tocsr()
+    edges = np.stack([nbr[:, 1:].reshape(-1), rows])
+    solver = GravoMG.from_points(pos, edges, lower_bound=20)
+    levels = solver.setup(A)
+    assert len(levels.A) >= 2
+    expected = A
+    for P, coarse in zip(solver.prolongations, levels.A[1:]):
+        expected = (P.T @ expected @ P).tocsr()
+        assert coarse.has_sorted_indices
+        assert np.array_equal(coarse.indptr, expected.indptr)
+        assert np.array_equal(coarse.indices, expected.indices)
+        np.testing.assert_allclose(coarse.data, expected.data,
+                                   rtol=1e-12, atol=1e-12 * abs(
+                                       expected.data).max())
+    if neighbours == 40:
+        assert np.diff(levels.A[1].indptr).max() > 48
+
+
 @pytest.mark.parametrize('cycle', ['V', 'W', 'F'])
 def test_cycles_converge(cycle):
     A, m, solver = case('closed')

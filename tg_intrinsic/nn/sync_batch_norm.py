@@ -2,6 +2,7 @@ from typing import Optional
 
 import torch
 from torch import Tensor
+from torch.nn.modules.batchnorm import _BatchNorm
 
 from tg_intrinsic.geometry.checks import check_tensor
 from tg_intrinsic.nn.complex_batch_norm import ComplexBatchNorm
@@ -13,7 +14,7 @@ _REAL_BATCH_NORMS = (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d,
                      torch.nn.BatchNorm3d, torch.nn.SyncBatchNorm)
 
 
-class SyncBatchNorm(torch.nn.SyncBatchNorm):
+class SyncBatchNorm(_BatchNorm):
     r"""Batch normalisation whose statistics are taken over the batches of
     all processes of a data-parallel run, on the CPU as well as on GPUs
     (`"Batch Normalization: Accelerating Deep Network Training by Reducing
@@ -33,8 +34,9 @@ class SyncBatchNorm(torch.nn.SyncBatchNorm):
     :func:`torch.distributed.nn.functional.all_reduce` (two reductions:
     the mean, then the centred squares, the two-pass variance of one
     process). :class:`torch.nn.SyncBatchNorm` (torch 2.13) runs on GPUs
-    only; this layer hands CUDA inputs to it and computes CPU ones itself.
-    In evaluation mode, outside a process group or in a group of one it is
+    only, and :class:`~torch.nn.parallel.DistributedDataParallel` refuses
+    it in CPU models; this layer runs on any device and backend. In
+    evaluation mode, outside a process group or in a group of one it is
     the ordinary batch norm. Build it from a model with
     :func:`convert_sync_batch_norm`; it keeps the parameter and buffer
     names of :class:`torch.nn.BatchNorm1d`, so checkpoints load both ways.
@@ -54,14 +56,35 @@ class SyncBatchNorm(torch.nn.SyncBatchNorm):
     Shapes:
         - **input / output:** :math:`(N, C)` or :math:`(N, C, *)`
     """
-    def forward(self, input: Tensor) -> Tensor:
-        check_tensor(input, 'input')
+    def __init__(self, num_features: int, eps: float = 1e-5,
+                 momentum: Optional[float] = 0.1, affine: bool = True,
+                 track_running_stats: bool = True,
+                 process_group: Optional[object] = None):
+        super().__init__(num_features, eps, momentum, affine,
+                         track_running_stats)
+        self.process_group = process_group
+
+    def _check_input_dim(self, input: Tensor):
         if input.dim() < 2 or input.size(1) != self.num_features:
             raise ValueError(f"expected features [N, {self.num_features}] "
                              f"or [N, {self.num_features}, L], got "
                              f"{list(input.shape)}")
+
+    def all_reduce(self, sums: Tensor) -> Tensor:
+        """:obj:`sums` summed over the processes this layer synchronises
+        (differentiable; unchanged outside a group or in evaluation mode):
+        for layers that compute the statistics of this batch norm
+        themselves, as DeltaConv's neighbour maximum does."""
         group = active_group(self.process_group)
-        if input.device.type != 'cpu' or not self.training or group is None:
+        if not self.training or group is None:
+            return sums
+        return all_reduce_sum(sums, group)
+
+    def forward(self, input: Tensor) -> Tensor:
+        check_tensor(input, 'input')
+        self._check_input_dim(input)
+        group = active_group(self.process_group)
+        if not self.training or group is None:
             return super().forward(input)
         momentum = 0.0 if self.momentum is None else self.momentum
         if self.track_running_stats:
@@ -74,7 +97,7 @@ class SyncBatchNorm(torch.nn.SyncBatchNorm):
         local = torch.cat([input.sum(dims),
                            input.new_full((1, ), float(count))])
         total = all_reduce_sum(local, group)
-        n = total[-1]
+        n = total[-1].detach()
         if float(n) < 1:
             raise ValueError("the batch is empty on every process: batch "
                              "norm needs at least one sample")

@@ -55,7 +55,7 @@ class SyncComplexBatchNorm(ComplexBatchNorm):
         power = (z.real ** 2 + z.imag ** 2).sum(dim=0).flatten()
         local = torch.cat([power, power.new_full((1, ), float(z.size(0)))])
         total = all_reduce_sum(local, group)
-        n = total[-1]
+        n = total[-1].detach()
         if float(n) < 1:
             return super().forward(z)   # no points anywhere: running value
         square = (total[:-1] / n).view(self.streams, self.channels)

@@ -18,13 +18,13 @@ evaluation). Configurations, on the CPU:
 The speed-up of 2 processes is epoch(1 process x 2 threads) / epoch(2
 processes) - both use the two cores - and against 1 thread. Models:
 DeltaNet classification (deltanet-shrec11 widths 32, 32, 32, 32 on
-SyntheticModelNet, 1024 points, 192 training shapes, global batch 16) and
+SyntheticModelNet, 1024 points, 96 training shapes, global batch 16) and
 HSN classification (hsn-shrec11 on SyntheticSHREC meshes of 200-300
-vertices, 150 training shapes, global batch 8: HSN's paper batch of 1
+vertices, 90 training shapes, global batch 8: HSN's paper batch of 1
 cannot be split over processes). No augmentation and no dropout (identical
 draws everywhere; the final losses show that the runs train the same).
 With CUDA, 1 GPU against all GPUs (``--device cuda``) is timed as well;
-without, the JSON says "no GPU". About 8 minutes on 2 cores.
+without, the JSON says "no GPU". About 5 minutes on 2 cores.
 
 Usage: python benchmarks/ddp_training.py [--quick] [--root data]
 Writes benchmarks/results/ddp_training.json and .png.
@@ -49,10 +49,10 @@ ROOT = os.path.dirname(HERE)
 MODELS = {
     'deltanet': ['--model', 'deltanet', '--protocol', 'deltanet-shrec11',
                  '--dataset', 'synthetic_modelnet', '--num-points', '1024',
-                 '--shapes-per-class', '32', '--train-per-class', '16',
+                 '--shapes-per-class', '16', '--train-per-class', '8',
                  '--batch-size', '16', '--dropout', '0'],
     'hsn': ['--model', 'hsn', '--dataset', 'synthetic_shrec',
-            '--num-vertices', '200', '300', '--shapes-per-class', '10',
+            '--num-vertices', '200', '300', '--shapes-per-class', '6',
             '--batch-size', '8']}
 QUICK = {'deltanet': ['--num-points', '256', '--shapes-per-class', '4',
                       '--batch-size', '8'],

@@ -25,14 +25,36 @@ and the random number generators' states; written atomically at every
 evaluation, so ``--resume`` continues an interrupted run), ``metrics.json``,
 ``metrics.csv`` (one row per epoch) and ``learning_curve.png``.
 
-Runs are reproducible: ``--seed`` seeds torch, NumPy and Python's
-``random`` (the augmentations draw from them) and the shuffling, so two
-runs with the same arguments on the same machine and thread count give the
-same weights bit for bit on the CPU. ``--resume`` restores the generators'
-states of the checkpoint, so an interrupted and resumed run shuffles and
-augments its remaining epochs as an uninterrupted one would, and ends with
-the same weights. A run starting or resuming in ``--out`` removes the
-temporary files (``.tmp-*``) that a run killed while writing left there.
+Runs are reproducible: ``--seed`` seeds the model's initialisation and,
+with the epoch, everything random in an epoch: the shuffling, each
+shape's augmentation (seeded by its index too) and dropout. So two runs
+with the same arguments on the same machine and thread count give the
+same weights bit for bit on the CPU, and an interrupted run resumed with
+``--resume`` shuffles and augments its remaining epochs as an
+uninterrupted one would, and ends with the same weights. (Older
+checkpoints' generator states, ``rng``, are no longer needed and are
+ignored.) A run starting or resuming in ``--out`` removes the temporary
+files (``.tmp-*``) that a run killed while writing left there.
+
+Data-parallel training: under ``torchrun`` (one process per core or GPU,
+e.g. ``torchrun --standalone --nproc_per_node 2 -m tg_intrinsic.train
+...``) every process joins the process group its environment describes
+(backend ``gloo`` on the CPU, ``nccl`` on CUDA, ``--backend`` to choose)
+and trains the model wrapped in
+:class:`~torch.nn.parallel.DistributedDataParallel`. ``--batch-size`` is
+the global batch, a multiple of the number of processes N: each process
+takes its 1/N of every global batch (:func:`tg_intrinsic.distributed.
+epoch_batches`; the remainder of an epoch is dropped as on one process),
+so N processes and one see the same batches; losses and scores are summed
+over the processes and equal one process's. Batch norm: by default each
+process normalises with the statistics of its own part of the batch (as
+DDP does; faster, but another run than one process's);
+``--sync-batch-norm`` takes them over the global batch
+(:func:`tg_intrinsic.nn.convert_sync_batch_norm`, on the CPU too), and
+then, without dropout (``--dropout 0``), N processes train as one to
+float32 rounding. Rank 0 prepares the input cache first (the others then
+read it), reads a checkpoint to resume (any number of processes may have
+written it) and alone prints and writes the outputs.
 """
 import argparse
 import hashlib

@@ -107,6 +107,9 @@ def test_one_process_is_the_ordinary_batch_norm():
         assert torch.equal(a, b)
     for name, g in plain[2].items():
         assert torch.equal(same[2][name], g)
+    # the sums layers compute themselves (DeltaConv's neighbour maximum)
+    sums = torch.randn(5)
+    assert synced.norm.all_reduce(sums) is sums
     # evaluation uses the running statistics, as the plain layer does
     synced.eval()
     h = torch.randn(5, 4, dtype=torch.float64)

@@ -20,7 +20,7 @@ processes) - both use the two cores - and against 1 thread. Models:
 DeltaNet classification (deltanet-shrec11 widths 32, 32, 32, 32 on
 SyntheticModelNet, 1024 points, 96 training shapes, global batch 16) and
 HSN classification (hsn-shrec11 on SyntheticSHREC meshes of 200-300
-vertices, 90 training shapes, global batch 8: HSN's paper batch of 1
+vertices, 36 training shapes, global batch 8: HSN's paper batch of 1
 cannot be split over processes). No augmentation and no dropout (identical
 draws everywhere; the final losses show that the runs train the same).
 With CUDA, 1 GPU against all GPUs (``--device cuda``) is timed as well;

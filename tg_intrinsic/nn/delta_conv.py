@@ -225,7 +225,7 @@ class DeltaConv(MessagePassing):
                 sums = bn.all_reduce(torch.cat([
                     total, square, u.new_full((1, ), float(num_edges))]))
                 total, square = sums[:c], sums[c:2 * c]
-                num_edges = int(round(float(sums[-1])))
+                num_edges = int(round(float(sums[-1].detach())))
             mean = total / num_edges
             var = square / num_edges - mean * mean
             if bn.training and bn.track_running_stats:

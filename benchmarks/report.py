@@ -1233,6 +1233,30 @@ def perona_malik(d, _):
 
 
 # ------------------------------------------------------------------ table
+@rows_for('ddp_training')
+def ddp_training(d, _):
+    rows = []
+    for model, data in d['models'].items():
+        by = {c['label']: c for c in data['configurations']}
+        one_2 = by['1 process x 2 threads']['epoch_seconds']
+        one_1 = by['1 process x 1 thread']['epoch_seconds']
+        two = by['2 processes x 1 thread']['epoch_seconds']
+        sync = by['2 processes x 1 thread, sync BN']['epoch_seconds']
+        gpu = d['gpu'] if isinstance(d['gpu'], str) else \
+            f"{d['gpu']['devices']} x {d['gpu']['name']}"
+        rows.append((
+            f"Data-parallel training (torchrun, gloo), {model}",
+            'ddp_training.py',
+            f"{data['train_shapes']} shapes, same global batch, "
+            f"{d['machine']['cpu_count']} CPU cores: seconds per epoch 1 "
+            f"process x 2 threads {seconds(one_2)}, x 1 thread "
+            f"{seconds(one_1)}, 2 processes x 1 thread {seconds(two)} "
+            f"(speed-up {times(one_2 / two, 2)} over 1 process x 2 "
+            f"threads, {times(one_1 / two, 2)} over 1 thread), with sync "
+            f"BN {seconds(sync)}; GPUs: {gpu}"))
+    return rows
+
+
 def load_results(directory: str) -> Dict[str, dict]:
     results = {}
     for path in sorted(glob.glob(os.path.join(directory, '*.json'))):

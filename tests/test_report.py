@@ -195,3 +195,20 @@ def test_sphere_digits_and_perona_malik_rows_follow_their_numbers(copies):
     assert len(changed) == 2
     assert 'trained upright: **turned test 12.3% vs' in changed[0]
     assert '**DeltaConv 0.05** vs' in changed[1]
+
+
+def test_the_ddp_training_row_follows_its_numbers(copies):
+    results, _ = copies
+    before = report.build_table(str(results))
+
+    def slower_two_processes(data):
+        rows = data['models']['deltanet']['configurations']
+        assert rows[2]['label'] == '2 processes x 1 thread'
+        rows[2]['epoch_seconds'] = rows[0]['epoch_seconds'] / 1.5
+
+    edit(results / 'ddp_training.json', slower_two_processes)
+    after = report.build_table(str(results))
+    changed = [line for line in after.split('\n')
+               if line not in before.split('\n')]
+    assert len(changed) == 1 and 'deltanet' in changed[0]
+    assert 'speed-up 1.50x over 1 process x 2 threads' in changed[0]

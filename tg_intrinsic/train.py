@@ -25,22 +25,44 @@ and the random number generators' states; written atomically at every
 evaluation, so ``--resume`` continues an interrupted run), ``metrics.json``,
 ``metrics.csv`` (one row per epoch) and ``learning_curve.png``.
 
-Runs are reproducible: ``--seed`` seeds torch, NumPy and Python's
-``random`` (the augmentations draw from them) and the shuffling, so two
-runs with the same arguments on the same machine and thread count give the
-same weights bit for bit on the CPU. ``--resume`` restores the generators'
-states of the checkpoint, so an interrupted and resumed run shuffles and
-augments its remaining epochs as an uninterrupted one would, and ends with
-the same weights. A run starting or resuming in ``--out`` removes the
-temporary files (``.tmp-*``) that a run killed while writing left there.
+Runs are reproducible: ``--seed`` seeds the model's initialisation and,
+with the epoch, everything random in an epoch: the shuffling, each
+shape's augmentation (seeded by its index too) and dropout. So two runs
+with the same arguments on the same machine and thread count give the
+same weights bit for bit on the CPU, and an interrupted run resumed with
+``--resume`` shuffles and augments its remaining epochs as an
+uninterrupted one would, and ends with the same weights. (Older
+checkpoints' generator states, ``rng``, are no longer needed and are
+ignored.) A run starting or resuming in ``--out`` removes the temporary
+files (``.tmp-*``) that a run killed while writing left there.
+
+Data-parallel training: under ``torchrun`` (one process per core or GPU,
+e.g. ``torchrun --standalone --nproc_per_node 2 -m tg_intrinsic.train
+...``) every process joins the process group its environment describes
+(backend ``gloo`` on the CPU, ``nccl`` on CUDA, ``--backend`` to choose)
+and trains the model wrapped in
+:class:`~torch.nn.parallel.DistributedDataParallel`. ``--batch-size`` is
+the global batch, a multiple of the number of processes N: each process
+takes its 1/N of every global batch (:func:`tg_intrinsic.distributed.
+epoch_batches`; the remainder of an epoch is dropped as on one process),
+so N processes and one see the same batches; losses and scores are summed
+over the processes and equal one process's. Batch norm: by default each
+process normalises with the statistics of its own part of the batch (as
+DDP does; faster, but another run than one process's);
+``--sync-batch-norm`` takes them over the global batch
+(:func:`tg_intrinsic.nn.convert_sync_batch_norm`, on the CPU too), and
+then, without dropout (``--dropout 0``), N processes train as one to
+float32 rounding. Rank 0 prepares the input cache first (the others then
+read it), reads a checkpoint to resume (any number of processes may have
+written it) and alone prints and writes the outputs.
 """
 import argparse
 import hashlib
 import json
+import math
 import os
 import random
 import time
-import warnings
 from typing import Dict, List, Optional
 
 import numpy as np
@@ -51,6 +73,7 @@ from torch_geometric.loader import DataLoader
 from torch_geometric.transforms import Compose, NormalizeScale, RandomScale
 from tqdm import tqdm
 
+from tg_intrinsic import distributed
 from tg_intrinsic.io.figures import save_figure
 from tg_intrinsic.protocols import DEFAULT_PROTOCOL, PROTOCOLS, get_protocol
 from tg_intrinsic.utils import (atomic_torch_save, atomic_write,
@@ -314,6 +337,8 @@ def build_model(name: str, num_classes: int, args,
                       k=args.k, regularizer=args.regularizer,
                       embedding_size=args.embedding_size,
                       vector_stream=not args.no_vector_stream)
+        if getattr(args, 'dropout', None) is not None:
+            kwargs['dropout'] = args.dropout
         if args.task == 'classification':
             return DeltaNetClassification(3, num_classes, **kwargs)
         return DeltaNetSegmentation(3, num_classes,
@@ -353,7 +378,9 @@ def instance_miou(pred: torch.Tensor, y: torch.Tensor,
 @torch.no_grad()
 def evaluate(model, loader, device, part_mask=None) -> Dict:
     """Accuracy over shapes (classification) or points (segmentation); with
-    a category-to-parts :obj:`part_mask` also the instance-averaged mIoU."""
+    a category-to-parts :obj:`part_mask` also the instance-averaged mIoU.
+    In a data-parallel run every process scores its part of the test set
+    (its :obj:`loader`) and the counts are summed over the processes."""
     model.eval()
     correct = total = 0
     ious = []
@@ -368,9 +395,12 @@ def evaluate(model, loader, device, part_mask=None) -> Dict:
                 ious.append(instance_miou(
                     pred[at], batch.y[at],
                     part_mask[int(batch.category[b])].to(device)))
-    out = {'accuracy': correct / max(total, 1)}
-    if ious:
-        out['miou'] = sum(ious) / len(ious)
+    sums = distributed.all_reduce_sum(torch.tensor(
+        [correct, total, math.fsum(ious), len(ious)], dtype=torch.float64,
+        device=device))
+    out = {'accuracy': int(sums[0]) / max(int(sums[1]), 1)}
+    if int(sums[3]):
+        out['miou'] = float(sums[2]) / int(sums[3])
     return out
 
 
@@ -430,51 +460,51 @@ def seed_everything(seed: int) -> None:
     random.seed(seed)
 
 
-def rng_state(loader_generator: torch.Generator) -> Dict:
-    """The states of every generator training draws from (see
-    :func:`seed_everything`) and of the shuffling generator, for a
-    checkpoint."""
-    state = {'torch': torch.get_rng_state(), 'numpy': np.random.get_state(),
-             'python': random.getstate(),
-             'loader': loader_generator.get_state()}
-    if torch.cuda.is_available():
-        state['cuda'] = torch.cuda.get_rng_state_all()
-    return state
-
-
-def set_rng_state(state: Dict, loader_generator: torch.Generator) -> None:
-    """Restores what :func:`rng_state` saved."""
-    torch.set_rng_state(state['torch'].cpu())
-    np.random.set_state(state['numpy'])
-    random.setstate(state['python'])
-    loader_generator.set_state(state['loader'].cpu())
-    if 'cuda' in state and torch.cuda.is_available() and \
-            len(state['cuda']) == torch.cuda.device_count():
-        torch.cuda.set_rng_state_all([s.cpu() for s in state['cuda']])
-
-
 def train(args) -> Dict:
+    """Trains as :obj:`args` say (see the module docstring), on one
+    process or, under ``torchrun``, on every process of the run."""
+    device, started = distributed.start(args.backend, args.device)
+    try:
+        return _train(args, device)
+    finally:
+        if started:
+            distributed.stop()
+
+
+def _train(args, device) -> Dict:
+    rank, world = distributed.rank(), distributed.world_size()
+    main_process = rank == 0
+
+    def say(text):
+        if main_process:
+            print(text)
+
+    quiet = args.quiet or not main_process
     seed_everything(args.seed)
     if args.threads:
         torch.set_num_threads(args.threads)
-    device = torch.device(args.device if args.device != 'auto' else
-                          ('cuda' if torch.cuda.is_available() else 'cpu'))
     build = build_mesh_datasets if args.model == 'hsn' else build_point_sets
-    train_items, test_items, source = build(args)
+    if not main_process:   # no progress bars beside rank 0's
+        args = argparse.Namespace(**{**vars(args), 'quiet': True})
+    # rank 0 prepares (and caches) the inputs, the others then read them
+    train_items, test_items, source = distributed.rank_zero_first(
+        lambda: build(args))
     num_classes = source.num_classes
     part_mask = getattr(source, 'part_mask', None)
     if args.train_per_class is not None and args.task == 'classification':
         labels = [int(item.y) for item in train_items]
         train_items = [train_items[i] for i in select_per_class(
             labels, args.train_per_class, args.data_seed)]
-    augment = augmentation(args)
-    train_set = train_items if augment is None else \
-        _Mapped(train_items, augment)
+    train_set = _Mapped(train_items, augmentation(args), args.seed)
     # Seeded again: whether the inputs were prepared now or read from the
     # cache must not change what follows.
     seed_everything(args.seed)
     model = build_model(args.model, num_classes, args, None if part_mask
-                        is None else part_mask.size(0)).to(device)
+                        is None else part_mask.size(0))
+    if args.sync_batch_norm and world > 1:
+        from tg_intrinsic.nn import convert_sync_batch_norm
+        model = convert_sync_batch_norm(model)
+    model = model.to(device)
     if args.optimizer == 'sgd':
         optimizer = torch.optim.SGD(model.parameters(), lr=args.lr,
                                     momentum=0.9,
@@ -488,86 +518,109 @@ def train(args) -> Dict:
     else:
         schedule = torch.optim.lr_scheduler.MultiStepLR(
             optimizer, milestones=args.milestones, gamma=args.gamma)
-    os.makedirs(args.out, exist_ok=True)
-    # Left by a run killed while writing a checkpoint or metrics.
-    leftovers = remove_temporaries(args.out)
-    if leftovers:
-        print(f"removed {len(leftovers)} temporary file(s) of an interrupted "
-              f"write from {args.out}: {', '.join(leftovers)}")
     checkpoint_path = os.path.join(args.out, 'checkpoint.pt')
+    state = None
+    if main_process:
+        os.makedirs(args.out, exist_ok=True)
+        # Left by a run killed while writing a checkpoint or metrics.
+        leftovers = remove_temporaries(args.out)
+        if leftovers:
+            say(f"removed {len(leftovers)} temporary file(s) of an "
+                f"interrupted write from {args.out}: "
+                f"{', '.join(leftovers)}")
+        if args.resume and os.path.exists(checkpoint_path):
+            state = torch.load(checkpoint_path, map_location='cpu',
+                               weights_only=False)
+    # rank 0's checkpoint on every process (no shared file system needed)
+    state = distributed.broadcast_object(state)
     history: List[Dict] = []
     start_epoch = 1
-    generator = torch.Generator().manual_seed(args.seed)
-    if args.resume and os.path.exists(checkpoint_path):
-        state = torch.load(checkpoint_path, map_location=device,
-                           weights_only=False)
+    if state is not None:
+        # Written by any number of processes: the batches and random draws
+        # of an epoch depend on (seed, epoch) only, so the generators'
+        # states that older versions saved ('rng') are not needed.
         model.load_state_dict(state['model'])
         optimizer.load_state_dict(state['optimizer'])
         schedule.load_state_dict(state['schedule'])
         history = state['history']
         start_epoch = state['epoch'] + 1
-        if 'rng' in state:
-            set_rng_state(state['rng'], generator)
-        else:
-            warnings.warn(f"'{checkpoint_path}' holds no random number "
-                          f"generator states (an older version wrote it): "
-                          f"the resumed epochs shuffle and augment as the "
-                          f"first ones did, unlike an uninterrupted run",
-                          UserWarning, stacklevel=2)
-        print(f"resuming from epoch {state['epoch']} of {checkpoint_path}")
-
-    train_loader = DataLoader(train_set, args.batch_size, shuffle=True,
-                              drop_last=len(train_set) > args.batch_size,
-                              generator=generator)
-    test_loader = DataLoader(test_items, args.batch_size)
+        say(f"resuming from epoch {state['epoch']} of {checkpoint_path}")
+    net = model
+    if world > 1:
+        net = torch.nn.parallel.DistributedDataParallel(
+            model, device_ids=None if device.type == 'cpu' else [device])
+    # the test set: a contiguous part on every process, scores summed
+    test_loader = DataLoader(
+        [test_items[i] for i in distributed.shard(
+            range(len(test_items)), rank, world)], args.batch_size)
     num_params = sum(p.numel() for p in model.parameters())
-    print(f"{args.model} ({num_params / 1e6:.2f}M parameters), protocol "
-          f"{args.protocol}, on {args.dataset}: {len(train_set)} train / "
-          f"{len(test_items)} test, {num_classes} classes, {device}")
+    say(f"{args.model} ({num_params / 1e6:.2f}M parameters), protocol "
+        f"{args.protocol}, on {args.dataset}: {len(train_set)} train / "
+        f"{len(test_items)} test, {num_classes} classes, {device}"
+        + (f", {world} processes" if world > 1 else ''))
     started = time.perf_counter()
     for epoch in range(start_epoch, args.epochs + 1):
-        model.train()
-        loss_sum = correct = seen = 0
+        # Everything random in an epoch derives from (seed, epoch): the
+        # batches, each item's augmentation (seeded by its index too) and
+        # dropout (seeded by the rank too).
+        seed_everything(distributed.derived_seed(args.seed, epoch, rank))
+        train_set.epoch = epoch
+        train_loader = DataLoader(train_set, batch_sampler=(
+            distributed.epoch_batches(len(train_set), args.batch_size,
+                                      args.seed, epoch, rank, world)))
+        net.train()
+        totals = torch.zeros(3, dtype=torch.float64, device=device)
         bar = tqdm(train_loader, desc=f'epoch {epoch}/{args.epochs}',
-                   leave=False, disable=args.quiet)
+                   leave=False, disable=quiet)
         for batch in bar:
             batch = batch.to(device)
             optimizer.zero_grad()
-            out = model(batch)
+            out = net(batch)
             target = batch.y.view(-1)
-            loss = F.cross_entropy(out, target,
-                                   label_smoothing=args.label_smoothing)
-            if not torch.isfinite(loss):
-                raise RuntimeError(f"the training loss became {loss.item()} "
-                                   f"in epoch {epoch}; lower --lr")
-            loss.backward()
+            loss_sum = F.cross_entropy(out, target, reduction='sum',
+                                       label_smoothing=args.label_smoothing)
+            # [count, loss sum, correct] of the global batch
+            step = distributed.all_reduce_sum(torch.stack([
+                torch.tensor(float(target.numel()), dtype=torch.float64,
+                             device=device),
+                loss_sum.detach().double(),
+                (out.argmax(-1) == target).sum().double()]))
+            if not torch.isfinite(step[1]):
+                raise RuntimeError(f"the training loss became "
+                                   f"{float(step[1])} in epoch {epoch}; "
+                                   f"lower --lr")
+            # the mean over the global batch: DDP averages the gradients
+            # over the processes, so each one scales its sum by world / n
+            (loss_sum * (world / float(step[0]))).backward()
             optimizer.step()
-            n = target.numel()
-            loss_sum += float(loss.detach()) * n
-            correct += int((out.argmax(-1) == target).sum())
-            seen += n
-            bar.set_postfix(loss=f'{loss_sum / seen:.3f}')
+            totals += step
+            bar.set_postfix(loss=f'{float(totals[1] / totals[0]):.3f}')
         schedule.step()
-        record = {'epoch': epoch, 'train_loss': loss_sum / max(seen, 1),
-                  'train_accuracy': correct / max(seen, 1),
+        seen = max(float(totals[0]), 1.0)
+        record = {'epoch': epoch, 'train_loss': float(totals[1]) / seen,
+                  'train_accuracy': float(totals[2]) / seen,
                   'test_accuracy': None,
                   'seconds': time.perf_counter() - started}
         if epoch % args.eval_every == 0 or epoch == args.epochs:
+            # per-process batch norm statistics: rank 0's, as saved
+            distributed.broadcast_buffers(model)
             scores = evaluate(model, test_loader, device, part_mask)
             record['test_accuracy'] = scores['accuracy']
             if 'miou' in scores:
                 record['test_miou'] = scores['miou']
         history.append(record)
+        if not main_process:
+            continue
         write_metrics_csv(history, os.path.join(args.out, 'metrics.csv'))
         if record['test_accuracy'] is not None:
-            print(f"epoch {epoch}: loss {record['train_loss']:.3f}, "
-                  f"train {record['train_accuracy']:.3f}, "
-                  f"test {record['test_accuracy']:.3f}")
+            say(f"epoch {epoch}: loss {record['train_loss']:.3f}, "
+                f"train {record['train_accuracy']:.3f}, "
+                f"test {record['test_accuracy']:.3f}")
             atomic_torch_save({'model': model.state_dict(),
                                'optimizer': optimizer.state_dict(),
                                'schedule': schedule.state_dict(),
                                'history': history, 'epoch': epoch,
-                               'rng': rng_state(generator),
+                               'world_size': world,
                                'args': vars(args)}, checkpoint_path)
             plot_history(history, os.path.join(args.out,
                                                'learning_curve.png'),
@@ -582,22 +635,37 @@ def train(args) -> Dict:
                'best_test_accuracy': max(
                    (h['test_accuracy'] for h in history
                     if h['test_accuracy'] is not None), default=None),
+               'world_size': world,
                'history': history, 'args': vars(args)}
-    atomic_write_json(os.path.join(args.out, 'metrics.json'), metrics)
-    print(f"final test accuracy: {final:.3f} (written to {args.out})")
+    if main_process:
+        atomic_write_json(os.path.join(args.out, 'metrics.json'), metrics)
+        say(f"final test accuracy: {final:.3f} (written to {args.out})")
     return metrics
 
 
 class _Mapped(torch.utils.data.Dataset):
-    """A list of examples with a transform applied on access."""
-    def __init__(self, items, transform):
-        self.items, self.transform = items, transform
+    """A list of examples with a random transform applied on access, its
+    draws seeded by (seed, :attr:`epoch`, index): the same on any process
+    and after any history. The global generators are left as they were."""
+    def __init__(self, items, transform, seed: int):
+        self.items, self.transform, self.seed = items, transform, seed
+        self.epoch = 0
 
     def __len__(self):
         return len(self.items)
 
     def __getitem__(self, index):
-        return self.transform(self.items[index])
+        if self.transform is None:
+            return self.items[index]
+        saved = np.random.get_state(), random.getstate()
+        with torch.random.fork_rng(devices=[]):
+            seed_everything(distributed.derived_seed(self.seed, self.epoch,
+                                                     index))
+            try:
+                return self.transform(self.items[index])
+            finally:
+                np.random.set_state(saved[0])
+                random.setstate(saved[1])
 
 
 def add_arguments(parser, model_and_dataset: bool = True):
@@ -636,7 +704,9 @@ def add_arguments(parser, model_and_dataset: bool = True):
         help='protocol; train on this many shapes of every class, drawn '
         'with --data-seed (classification)')
     add('--epochs', type=int, default=None, help='protocol')
-    add('--batch-size', type=int, default=None, help='protocol')
+    add('--batch-size', type=int, default=None,
+        help='protocol; the global batch: under torchrun each of the N '
+        'processes takes 1/N of it (a multiple of N)')
     add('--optimizer', default=None, choices=['adam', 'sgd'],
         help='protocol; sgd uses momentum 0.9')
     add('--lr', type=float, default=None, help='protocol')
@@ -691,7 +761,18 @@ def add_arguments(parser, model_and_dataset: bool = True):
         'per-class training split')
     add('--device', default='auto')
     add('--threads', type=int, default=0)
-    add('--resume', action='store_true')
+    add('--resume', action='store_true',
+        help='continue from the checkpoint in --out (written by any number '
+        'of processes)')
+    add('--dropout', type=float, default=None,
+        help="DeltaNet: dropout of the head (default: the model's, 0.5)")
+    add('--backend', default='auto', choices=list(distributed.BACKENDS),
+        help='under torchrun: the torch.distributed backend (auto: nccl on '
+        'CUDA, gloo on the CPU)')
+    add('--sync-batch-norm', action='store_true',
+        help='under torchrun: batch norm statistics over the global batch '
+        '(all processes); default: per process, as DDP does, which is '
+        'faster but differs from one process with the same batch')
     if model_and_dataset:
         add('--quiet', action='store_true', help='no progress bar')
 
@@ -728,6 +809,16 @@ def check_arguments(args, parser):
         if getattr(args, name) < 0:
             parser.error(f"--{name.replace('_', '-')} must not be negative, "
                          f"got {getattr(args, name)}")
+    if args.dropout is not None and not 0 <= args.dropout < 1:
+        parser.error(f"--dropout must be in [0, 1), got {args.dropout}")
+    try:
+        world = distributed.launched_world_size()
+    except ValueError as error:
+        parser.error(str(error))
+    if args.batch_size % world:
+        parser.error(f"--batch-size {args.batch_size} is the global batch, "
+                     f"split evenly over the {world} processes: make it a "
+                     f"multiple of {world}")
     if args.resample_vertices == 0:
         args.resample_vertices = None
     for name in ('shapes_per_class', 'train_per_class', 'resample_vertices'):

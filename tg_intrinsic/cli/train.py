@@ -23,7 +23,10 @@ hsn-shrec11, hsn-human-seg). FOLDER may be any standard layout:
 <class>/<train|test>/*.off|obj|ply, MeshCNN segmentation, point clouds
 <class>/<train|test>/*.txt|xyz|npy|pts, modelnet40_normal_resampled,
 ShapeNet-Part (normal), ScanObjectNN h5_files.
-Also available as "python -m tg_intrinsic.train --model deltanet ..."."""
+Also available as "python -m tg_intrinsic.train --model deltanet ...".
+Data-parallel: torchrun --standalone --nproc_per_node N --no-python
+tg-intrinsic train deltanet ... (--batch-size is the global batch, a
+multiple of N; --sync-batch-norm for batch statistics over all of it)."""
 
 SYNTHETIC = {'synthetic-modelnet': 'synthetic_modelnet',
              'synthetic-shrec': 'synthetic_shrec',

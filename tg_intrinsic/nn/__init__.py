@@ -12,8 +12,11 @@ from .harmonic_conv import HarmonicConv
 from .harmonic_resnet_block import HarmonicResNetBlock
 from .frequency_svbrdf import FrequencySVBRDF
 from .svbrdf_result import SVBRDFResult
+from .sync_complex_batch_norm import SyncComplexBatchNorm
+from .sync_batch_norm import SyncBatchNorm, convert_sync_batch_norm
 from . import models
 
 __all__ = ['VectorLinear', 'VectorNonLin', 'VectorMLP', 'DeltaConv',
            'ComplexReLU', 'ComplexLinear', 'ComplexBatchNorm', 'HarmonicConv',
-           'HarmonicResNetBlock', 'FrequencySVBRDF', 'SVBRDFResult', 'models']
+           'HarmonicResNetBlock', 'FrequencySVBRDF', 'SVBRDFResult', 'models',
+           'SyncBatchNorm', 'SyncComplexBatchNorm', 'convert_sync_batch_norm']

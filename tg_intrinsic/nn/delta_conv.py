@@ -11,6 +11,7 @@ from tg_intrinsic.geometry.checks import (check_edge_index,
 from tg_intrinsic.geometry.pointcloud.operators import (SurfaceOperators,
                                                         interleaved, planar,
                                                         vector_norm)
+from tg_intrinsic.nn.sync_batch_norm import SyncBatchNorm
 from tg_intrinsic.nn.vector_linear import VectorLinear
 from tg_intrinsic.nn.vector_mlp import VectorMLP
 from tg_intrinsic.nn.vector_nonlin import VectorNonLin
@@ -216,9 +217,16 @@ class DeltaConv(MessagePassing):
             num_edges = operators.edge_index.size(1)
             in_degree = operators.crow.diff().to(u.dtype)
             out_degree = operators.out_degree.to(u.dtype)
-            mean = (out_degree - in_degree) @ u / num_edges
+            total = (out_degree - in_degree) @ u
             square = ((out_degree + in_degree) @ (u * u)
                       - 2 * (u * operators.neighbor_sum(u)).sum(0))
+            if isinstance(bn, SyncBatchNorm):   # over all processes' edges
+                c = u.size(1)
+                sums = bn.all_reduce(torch.cat([
+                    total, square, u.new_full((1, ), float(num_edges))]))
+                total, square = sums[:c], sums[c:2 * c]
+                num_edges = int(round(float(sums[-1].detach())))
+            mean = total / num_edges
             var = square / num_edges - mean * mean
             if bn.training and bn.track_running_stats:
                 with torch.no_grad():

@@ -104,8 +104,11 @@ def embed_and_pool(x: Tensor, linear: torch.nn.Linear,
 
 def can_fuse(x: Tensor, linear: torch.nn.Linear,
              norm: torch.nn.BatchNorm1d) -> bool:
+    # a synchronised batch norm (not a BatchNorm1d) takes its statistics
+    # over all processes, which the fused sweep cannot
     return (x.device.type == 'cpu' and x.dtype in (torch.float32,
                                                    torch.float64)
+            and isinstance(norm, torch.nn.BatchNorm1d)
             and linear.bias is None and norm.affine
             and norm.track_running_stats and x.size(0) > 1)
 

@@ -88,9 +88,9 @@ def parallel_map(function: Callable, items: Iterable, workers: int = 1,
     Items are read from ``items`` lazily and at most ``2 * workers`` are
     in flight, so memory stays bounded whatever the length. An exception
     raised for an item is raised again, of the same type, with the item's
-    name (``name_of(index, item)``, default ``"item <index>"``) in front
-    of its message; a worker process that dies raises
-    :class:`WorkerDied`.
+    name (``name_of(index, item)``, default ``"item <index>"``; a name of
+    ``None`` leaves the error as it is) in front of its message; a worker
+    process that dies raises :class:`WorkerDied`.
 
     Args:
         function (callable): Applied to every item; with more than one
@@ -102,8 +102,8 @@ def parallel_map(function: Callable, items: Iterable, workers: int = 1,
         log (bool, optional): Show a progress bar. (default: :obj:`True`)
         unit (str, optional): Unit of the progress bar.
             (default: :obj:`"item"`)
-        name_of (callable, optional): ``(index, item) -> str``, the item's
-            name in error messages. (default: :obj:`None`)
+        name_of (callable, optional): ``(index, item) -> str or None``,
+            the item's name in error messages. (default: :obj:`None`)
     """
     workers = check_positive_int(workers, 'workers', 1)
     name_of = name_of or (lambda index, _: f'item {index}')
@@ -127,7 +127,10 @@ def _serial(function, items, bar, name_of):
             try:
                 result = function(item)
             except Exception as error:
-                raise _named(error, name_of(index, item)) from error
+                name = name_of(index, item)
+                if not name:
+                    raise
+                raise _named(error, name) from error
             bar.update(1)
             yield result
     finally:
@@ -161,6 +164,8 @@ def _pooled(function, items, workers, bar, name_of, desc):
                     f"{desc}: the worker process computing {name} died "
                     f"(out of memory? try fewer workers)", index) from None
             except Exception as error:
+                if not name:
+                    raise
                 raise _named(error, name) from error
             submit()
             bar.update(1)

@@ -195,3 +195,23 @@ def test_sphere_digits_and_perona_malik_rows_follow_their_numbers(copies):
     assert len(changed) == 2
     assert 'trained upright: **turned test 12.3% vs' in changed[0]
     assert '**DeltaConv 0.05** vs' in changed[1]
+
+
+def test_the_out_of_core_row_follows_its_numbers(copies):
+    results, _ = copies
+    before = report.build_table(str(results))
+
+    def grown(data):
+        largest = max(r['size'] for r in data['rows'])
+        for r in data['rows']:
+            if r['arm'] == 'on_disk' and r['size'] == largest:
+                r['peak_mb'] = 98765.4
+        data['preparation']['identical'] = False
+
+    edit(results / 'out_of_core.json', grown)
+    after = report.build_table(str(results))
+    changed = [line for line in after.split('\n')
+               if line not in before.split('\n')]
+    assert len(changed) == 1
+    assert ', 98765 MB (' in changed[0]
+    assert 'identical databases: NO' in changed[0]

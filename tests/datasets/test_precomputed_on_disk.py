@@ -86,6 +86,10 @@ def test_round_trip_and_batches(tmp_path, kind):
                               log=False)
     assert_same(again[len(source) - 1], expected[-1])
     assert rows(again) == rows(dataset)
+    # opened without the source (e.g. by another process)
+    opened = PrecomputedOnDisk(str(tmp_path), None, log=False)
+    assert len(opened) == len(source)
+    assert_same(opened[0], expected[0])
 
 
 def test_a_subset_batches_its_own_examples(tmp_path):
@@ -180,6 +184,8 @@ def test_reuse_with_other_settings_fails_clearly(tmp_path):
 
 
 def test_bad_input(tmp_path):
+    with pytest.raises(ValueError, match='holds no finished database'):
+        PrecomputedOnDisk(str(tmp_path), None, log=False)
     with pytest.raises(ValueError, match="'source' is empty"):
         PrecomputedOnDisk(str(tmp_path), [], log=False)
     with pytest.raises(TypeError, match='sequence'):

@@ -113,7 +113,9 @@ class PrecomputedOnDisk(OnDiskDataset):
         root (str): Folder of the database (``root/processed/sqlite.db``).
         source (Sequence): The examples to precompute: a data set, a list
             of :class:`~torch_geometric.data.Data`, or any sequence of
-            picklable items that :obj:`pre_transform` turns into Data.
+            picklable items that :obj:`pre_transform` turns into Data;
+            :obj:`None` opens the finished database in :obj:`root` as it
+            is (e.g. in another process), without checking its settings.
         pre_transform (callable, optional): Applied to every source item
             before it is stored, e.g.
             :class:`~tg_intrinsic.transforms.MLSOperators`; with more than
@@ -137,12 +139,26 @@ class PrecomputedOnDisk(OnDiskDataset):
     #: Bumped whenever the stored format changes.
     version = 1
 
-    def __init__(self, root: str, source: Sequence,
+    def __init__(self, root: str, source: Optional[Sequence],
                  pre_transform: Optional[Callable] = None,
                  transform: Optional[Callable] = None, workers: int = 1,
                  chunk_size: int = 32, log: bool = True,
                  force_reload: bool = False):
         name = type(self).__name__
+        root = osp.expanduser(os.fspath(root))
+        folder = osp.join(root, 'processed')
+        if source is None:  # open a finished database as it is
+            done = self._read(osp.join(folder, 'complete.json'))
+            if done is None or not osp.exists(osp.join(folder, 'sqlite.db')):
+                raise ValueError(f"{name}: '{folder}' holds no finished "
+                                 f"database; give the 'source' to "
+                                 f"precompute it")
+            self.source, self.precompute = None, pre_transform
+            self.workers, self.chunk_size = 1, 1
+            self.settings = done['settings']
+            super().__init__(root, transform, log=log)
+            self.pre_transform = pre_transform
+            return
         try:
             length = len(source)
         except TypeError:
@@ -158,8 +174,6 @@ class PrecomputedOnDisk(OnDiskDataset):
             check_picklable(pre_transform, 'pre_transform', name)
         self.source, self.precompute = source, pre_transform
         self.settings = self.settings_of(source, pre_transform)
-        root = osp.expanduser(os.fspath(root))
-        folder = osp.join(root, 'processed')
         if force_reload:
             self._remove(folder)
         self._check_finished(folder)

@@ -5,24 +5,24 @@ database (PyG's OnDiskDataset, SQLite; what --on-disk trains from); and
 the preparation time with 1 and 2 worker processes.
 
 Protocol: SyntheticModelNet point clouds of 1024 points (generated once,
-by 2 workers), DeltaConv's MLS operators (k = 20) precomputed into one
-database by 2 workers (about 0.7 MB per example). For every size N (4
-sizes, doubling; default 500 to 4000 shapes, an in-memory list of about
-2.9 GB at the largest) and each of the two arms, a fresh Python process
-(one torch thread) builds the network, then holds the first N examples as
-a list read from the database (in memory) or opens the database (on
-disk), and trains one epoch: shuffled batches of 16 (seeded), a tiny
-DeltaNet (one DeltaConv block of width 4, embedding 32, so that the CPU
-budget goes to the data, not the network) with Adam. The peak resident
-memory of that process is read from /proc/self/status (VmHWM, what the
-kernel counts; tracemalloc does not see torch tensors), and its resident
-memory before the data is touched is the baseline. The two arms of a size
-run side by side (one core each), so epoch times are for two busy cores;
-both arms must end with the same training loss (the same batches).
-Preparation: the first 768 shapes' operators written into a database by 1
-and by 2 workers (timed on an otherwise idle machine: run it under the
-project's lock), and the two databases compared row by row.
-On this machine (2 cores) the default run takes about 10 minutes.
+by 2 workers, and cached under --root), DeltaConv's MLS operators (k =
+20) precomputed into a database (about 0.7 MB per example) twice, by 1
+and by 2 worker processes: both timed (on an otherwise idle machine: run
+it under the project's lock) and compared row by row. For every size N
+(4 sizes, doubling; default 500 to 4000 shapes, an in-memory list of
+about 2.9 GB at the largest) and each of the two arms, a fresh Python
+process (one torch thread) builds the network, then holds the first N
+examples as a list read from the database (in memory) or opens the
+database (on disk), and trains one epoch: shuffled batches of 16
+(seeded), a tiny DeltaNet (one DeltaConv block of width 4, embedding 32,
+so that the CPU budget goes to the data, not the network) with Adam. The
+peak resident memory of that process is read from /proc/self/status
+(VmHWM, what the kernel counts; tracemalloc does not see torch tensors),
+its resident memory before the data is touched is the baseline. The two
+arms of a size run side by side (one core each), so epoch times are for
+two busy cores; both arms must end with the same training loss (the same
+batches). On this machine (2 cores) the default run takes about 10
+minutes.
 
 Usage: python benchmarks/out_of_core.py [--sizes 500 1000 2000 4000]
     [--root data/out_of_core] [--quick]
@@ -39,7 +39,7 @@ import time
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-NUM_POINTS, K, BATCH, PREP_SHAPES = 1024, 20, 16, 768
+NUM_POINTS, K, BATCH = 1024, 20, 16
 ARMS = ('in_memory', 'on_disk')
 
 
@@ -99,10 +99,18 @@ def run_pair(size: int, database: str) -> list:
     return rows
 
 
-def stored_rows(path: str) -> list:
-    with sqlite3.connect(os.path.join(path, 'processed', 'sqlite.db')) as db:
-        return db.execute('SELECT * FROM PrecomputedOnDisk ORDER BY id'
-                          ).fetchall()
+def same_rows(first: str, second: str) -> bool:
+    """Whether two databases hold the same rows, byte for byte (read
+    row by row)."""
+    query = 'SELECT * FROM PrecomputedOnDisk ORDER BY id'
+    with sqlite3.connect(first) as a, sqlite3.connect(second) as b:
+        rows_a, rows_b = a.execute(query), b.execute(query)
+        while True:
+            x, y = rows_a.fetchone(), rows_b.fetchone()
+            if x != y:
+                return False
+            if x is None:
+                return True
 
 
 class First:
@@ -135,8 +143,6 @@ def main():
     parser.add_argument('--out', default=os.path.join(HERE, 'results'))
     parser.add_argument('--quick', action='store_true',
                         help='sizes 48 96 192: a check that it runs')
-    parser.add_argument('--prep-shapes', type=int, default=PREP_SHAPES,
-                        help='shapes of the 1 vs 2 worker timing')
     parser.add_argument('--measure', nargs=3, metavar=('ARM', 'N', 'DB'),
                         help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -149,8 +155,7 @@ def main():
     from tg_intrinsic.transforms import MLSOperators
     from tg_intrinsic.utils import atomic_write_json, machine_info
     sizes = [48, 96, 192] if args.quick else sorted(args.sizes)
-    prep_shapes = 96 if args.quick else args.prep_shapes
-    largest = max(max(sizes), prep_shapes)
+    largest = max(sizes)
     results = {'machine': machine_info(), 'quick': args.quick,
                'protocol': __doc__.split('Usage:')[0].strip(),
                'num_points': NUM_POINTS, 'k': K, 'batch_size': BATCH,
@@ -163,32 +168,28 @@ def main():
     operators = MLSOperators(k=K)
     torch.set_num_threads(1)
 
-    prep = {}
+    prep, datasets = {}, {}
     for workers in (1, 2):
-        path = os.path.join(args.root, f'prep_workers{workers}')
+        path = os.path.join(args.root, f'mls_k{K}_workers{workers}')
         start = time.perf_counter()
-        PrecomputedOnDisk(path, First(source, prep_shapes), operators,
-                          workers=workers, log=False,
-                          force_reload=True).close()
+        datasets[workers] = PrecomputedOnDisk(
+            path, First(source, max(sizes)), operators, workers=workers,
+            log=False, force_reload=True)
         prep[workers] = time.perf_counter() - start
-        print(f'prepared {prep_shapes} shapes with {workers} worker(s) in '
+        datasets[workers].close()
+        print(f'prepared {max(sizes)} shapes with {workers} worker(s) in '
               f'{prep[workers]:.1f} s', flush=True)
+    database = os.path.join(args.root, f'mls_k{K}_workers2')
     results['preparation'] = {
-        'shapes': prep_shapes,
+        'shapes': max(sizes),
         'seconds': {str(w): s for w, s in prep.items()},
         'speedup': prep[1] / prep[2],
-        'identical': stored_rows(os.path.join(args.root, 'prep_workers1'))
-        == stored_rows(os.path.join(args.root, 'prep_workers2'))}
-
-    database = os.path.join(args.root, f'mls_k{K}')
-    start = time.perf_counter()
-    dataset = PrecomputedOnDisk(database, First(source, max(sizes)),
-                                operators, workers=2, log=True)
+        'identical': same_rows(datasets[1].processed_paths[0],
+                               datasets[2].processed_paths[0])}
     results['database'] = {
-        'shapes': len(dataset),
-        'build_seconds': time.perf_counter() - start,
-        'megabytes': os.path.getsize(dataset.processed_paths[0]) / 2 ** 20}
-    dataset.close()
+        'shapes': max(sizes),
+        'megabytes': os.path.getsize(datasets[2].processed_paths[0])
+        / 2 ** 20}
     rows = []
     for size in sizes:
         pair = run_pair(size, database)

@@ -137,6 +137,40 @@ def _serial(function, items, bar, name_of):
         single_thread(threads)
 
 
+class _CompactPickler(pickle.Pickler):
+    """Pickles a tensor that views part of a larger storage (an example
+    sliced out of an InMemoryDataset) as a copy of that part, not with
+    the whole storage."""
+    def reducer_override(self, obj):
+        import torch
+        if isinstance(obj, torch.Tensor) and obj.layout == torch.strided \
+                and not obj.is_sparse and obj.untyped_storage().nbytes() > \
+                obj.numel() * obj.element_size():
+            return obj.clone().__reduce_ex__(pickle.HIGHEST_PROTOCOL)
+        return NotImplemented
+
+
+def dumps(obj) -> bytes:
+    """``obj`` pickled with plain pickle, tensors compacted (see
+    :class:`_CompactPickler`): tensors travel inline in the bytes, rather
+    than as the shared-memory handles of torch's multiprocessing pickler,
+    which cost a round trip between the processes per tensor."""
+    import io
+    buffer = io.BytesIO()
+    _CompactPickler(buffer, protocol=pickle.HIGHEST_PROTOCOL).dump(obj)
+    return buffer.getvalue()
+
+
+class _Pickled:
+    """``function`` on a pickled item, its result pickled by
+    :func:`dumps`."""
+    def __init__(self, function):
+        self.function = function
+
+    def __call__(self, payload: bytes) -> bytes:
+        return dumps(self.function(pickle.loads(payload)))
+
+
 def _pooled(function, items, workers, bar, name_of, desc):
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
@@ -144,11 +178,13 @@ def _pooled(function, items, workers, bar, name_of, desc):
                                initializer=single_thread)
     pending = deque()
     source = enumerate(items)
+    work = _Pickled(function)
 
     def submit() -> bool:
         for index, item in source:
+            payload = dumps(item)
             pending.append((index, name_of(index, item),
-                            pool.submit(function, item)))
+                            pool.submit(work, payload)))
             return True
         return False
 
@@ -158,7 +194,7 @@ def _pooled(function, items, workers, bar, name_of, desc):
         while pending:
             index, name, future = pending.popleft()
             try:
-                result = future.result()
+                result = pickle.loads(future.result())
             except BrokenProcessPool:
                 raise WorkerDied(
                     f"{desc}: the worker process computing {name} died "

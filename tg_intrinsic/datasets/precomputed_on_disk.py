@@ -1,9 +1,11 @@
 """Precomputed examples in an on-disk database (PyG's OnDiskDataset)."""
 import hashlib
+import io
 import json
 import os
 import os.path as osp
 import re
+import warnings
 from typing import Any, Callable, Dict, List, Optional, Sequence
 
 import torch
@@ -46,20 +48,27 @@ def _digest(value, h) -> None:
         h.update(_plain(value).encode())
 
 
+def _to_bytes(data: BaseData) -> bytes:
+    buffer = io.BytesIO()
+    torch.save(data, buffer)
+    return buffer.getvalue()
+
+
 class _Precompute:
-    """``pre_transform(item)``, checked to be a Data object (the work of
-    one example in a worker process)."""
+    """``pre_transform(item)``, checked to be a Data object, serialised
+    (the work of one example in a worker process: the main process only
+    writes the bytes)."""
     def __init__(self, pre_transform):
         self.pre_transform = pre_transform
 
-    def __call__(self, item):
+    def __call__(self, item) -> bytes:
         out = item if self.pre_transform is None else \
             self.pre_transform(item)
         if not isinstance(out, BaseData):
             raise TypeError(f"the pre_transform must return a "
                             f"torch_geometric Data object, got "
                             f"{type(out).__name__}")
-        return out
+        return _to_bytes(out)
 
 
 class _Range:
@@ -82,7 +91,8 @@ class PrecomputedOnDisk(OnDiskDataset):
     sets whose precomputation does not fit in memory can be trained on with
     the ordinary :class:`~torch_geometric.loader.DataLoader`. Built on
     PyG's :class:`~torch_geometric.data.OnDiskDataset` (SQLite backend;
-    every example is one row, serialised with :func:`torch.save`, so the
+    every example is one row, serialised with :func:`torch.save` in the
+    worker that computed it, so the
     :class:`~torch_geometric.data.Data` subclass, e.g.
     :class:`~tg_intrinsic.data.IntrinsicData` and its per-level batching,
     survives the round trip).
@@ -137,7 +147,9 @@ class PrecomputedOnDisk(OnDiskDataset):
           source item
     """
     #: Bumped whenever the stored format changes.
-    version = 1
+    version = 2
+    #: One column: the example as :func:`torch.save` writes it.
+    SCHEMA = {'data': dict(dtype=torch.uint8, size=(-1, ))}
 
     def __init__(self, root: str, source: Optional[Sequence],
                  pre_transform: Optional[Callable] = None,
@@ -156,7 +168,8 @@ class PrecomputedOnDisk(OnDiskDataset):
             self.source, self.precompute = None, pre_transform
             self.workers, self.chunk_size = 1, 1
             self.settings = done['settings']
-            super().__init__(root, transform, log=log)
+            super().__init__(root, transform, schema=dict(self.SCHEMA),
+                             log=log)
             self.pre_transform = pre_transform
             return
         try:
@@ -177,7 +190,7 @@ class PrecomputedOnDisk(OnDiskDataset):
         if force_reload:
             self._remove(folder)
         self._check_finished(folder)
-        super().__init__(root, transform, log=log)
+        super().__init__(root, transform, schema=dict(self.SCHEMA), log=log)
         self.pre_transform = pre_transform
 
     # ------------------------------------------------------------------
@@ -253,6 +266,16 @@ class PrecomputedOnDisk(OnDiskDataset):
             self.extend(chunk)
         atomic_write_json(osp.join(folder, 'complete.json'),
                           {'settings': self.settings, 'length': len(self)})
+
+    def serialize(self, data) -> Dict[str, torch.Tensor]:
+        """The database row of ``data`` (a Data object, or its bytes)."""
+        blob = data if isinstance(data, bytes) else _to_bytes(data)
+        with warnings.catch_warnings():  # read-only bytes: never written
+            warnings.simplefilter('ignore')
+            return {'data': torch.frombuffer(blob, dtype=torch.uint8)}
+
+    def deserialize(self, row: Dict[str, torch.Tensor]) -> BaseData:
+        return torch.load(io.BytesIO(row['data'].numpy()), weights_only=False)
 
     def __getitems__(self, indices: List[int]) -> List[BaseData]:
         # through self.indices(), so a subset (index_select) batches its

@@ -9,8 +9,8 @@ by 2 workers, and cached under --root), DeltaConv's MLS operators (k =
 20) precomputed into a database (about 0.7 MB per example) twice, by 1
 and by 2 worker processes: both timed (on an otherwise idle machine: run
 it under the project's lock) and compared row by row. For every size N
-(4 sizes, doubling; default 500 to 4000 shapes, an in-memory list of
-about 2.9 GB at the largest) and each of the two arms, a fresh Python
+(4 sizes, doubling; default 375 to 3000 shapes, an in-memory list of
+about 2.1 GB at the largest) and each of the two arms, a fresh Python
 process (one torch thread) builds the network, then holds the first N
 examples as a list read from the database (in memory) or opens the
 database (on disk), and trains one epoch: shuffled batches of 16
@@ -21,10 +21,10 @@ peak resident memory of that process is read from /proc/self/status
 its resident memory before the data is touched is the baseline. The two
 arms of a size run side by side (one core each), so epoch times are for
 two busy cores; both arms must end with the same training loss (the same
-batches). On this machine (2 cores) the default run takes about 10
+batches). On this machine (2 cores) the default run takes about 11
 minutes.
 
-Usage: python benchmarks/out_of_core.py [--sizes 500 1000 2000 4000]
+Usage: python benchmarks/out_of_core.py [--sizes 375 750 1500 3000]
     [--root data/out_of_core] [--quick]
 Writes benchmarks/results/out_of_core.json and .png.
 """
@@ -137,7 +137,7 @@ def slope(rows: list, arm: str) -> float:
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument('--sizes', type=int, nargs='+',
-                        default=[500, 1000, 2000, 4000])
+                        default=[375, 750, 1500, 3000])
     parser.add_argument('--root', default=os.path.join('data',
                                                        'out_of_core'))
     parser.add_argument('--out', default=os.path.join(HERE, 'results'))

@@ -3,7 +3,7 @@ import os
 import pytest
 import torch
 
-from tg_intrinsic.parallel import (WorkerDied, check_picklable,
+from tg_intrinsic.parallel import (WorkerDied, check_picklable, dumps,
                                    parallel_map, single_thread)
 
 
@@ -72,3 +72,14 @@ def test_single_thread_returns_the_previous_counts():
         assert torch.get_num_threads() == 1
     finally:
         assert single_thread(previous) == (1, 1)
+
+
+def test_dumps_sends_a_view_without_its_whole_storage():
+    import pickle
+    from torch_geometric.data import Data
+    big = torch.arange(100000.0)
+    data = Data(pos=big[10:40].view(10, 3), y=big[:1])
+    payload = dumps(data)
+    assert len(payload) < 20000 < len(pickle.dumps(data))
+    back = pickle.loads(payload)
+    assert torch.equal(back.pos, data.pos) and torch.equal(back.y, data.y)

@@ -20,7 +20,8 @@ PRELOAD = ['torch', 'torch_geometric', 'tg_intrinsic.transforms',
 
 class WorkerDied(RuntimeError):
     """A worker process ended without a result (killed, out of memory);
-    :attr:`index` is the position of the item it was computing."""
+    :attr:`index` is the position of the first item left without a
+    result (that one or a later one in flight was being computed)."""
     def __init__(self, message: str, index: int):
         super().__init__(message)
         self.index = index
@@ -197,8 +198,9 @@ def _pooled(function, items, workers, bar, name_of, desc):
                 result = pickle.loads(future.result())
             except BrokenProcessPool:
                 raise WorkerDied(
-                    f"{desc}: the worker process computing {name} died "
-                    f"(out of memory? try fewer workers)", index) from None
+                    f"{desc}: a worker process died while computing "
+                    f"{name or f'item {index}'} or an item after it (out "
+                    f"of memory? try fewer workers)", index) from None
             except Exception as error:
                 if not name:
                     raise

@@ -1232,6 +1232,39 @@ def perona_malik(d, _):
              result)]
 
 
+@rows_for('out_of_core')
+def out_of_core(d, _):
+    rows = d['rows']
+    slopes, prep = d['mb_per_1000_shapes'], d['preparation']
+
+    def peaks(arm):
+        mine = sorted((r for r in rows if r['arm'] == arm),
+                      key=lambda r: r['size'])
+        return ', '.join(f"{r['peak_mb']:.0f}" for r in mine)
+
+    sizes = sorted({r['size'] for r in rows})
+    quick = ' (quick smoke run)' if d.get('quick') else ''
+    result = (f"peak resident memory of one DeltaNet training epoch (a "
+              f"fresh process each) on N = "
+              f"{', '.join(str(n) for n in sizes)} shapes of "
+              f"{d['num_points']} points with MLS operators (k = {d['k']}, "
+              f"{d['example_megabytes']:.2f} MB each){quick}: **on disk "
+              f"{peaks('on_disk')} MB ({slopes['on_disk']:.0f} MB per 1000 "
+              f"shapes)** vs in memory {peaks('in_memory')} MB "
+              f"({slopes['in_memory']:.0f} MB per 1000 shapes); same "
+              f"training loss: {'yes' if d['same_loss'] else 'NO'}; "
+              f"preparing {prep['shapes']} shapes: 1 worker "
+              f"{seconds(prep['seconds']['1'])} s, 2 workers "
+              f"{seconds(prep['seconds']['2'])} s "
+              f"({times(prep['speedup'], 2)}), identical databases: "
+              f"{'yes' if prep['identical'] else 'NO'}; "
+              f"{d['machine']['cpu_count']} CPU cores")
+    return [('out-of-core training data (PrecomputedOnDisk, train '
+             '--on-disk): memory stays flat as the data set grows; '
+             'parallel precomputation (--workers)', 'out_of_core.py',
+             result)]
+
+
 # ------------------------------------------------------------------ table
 @rows_for('ddp_training')
 def ddp_training(d, _):

@@ -212,3 +212,23 @@ def test_the_ddp_training_row_follows_its_numbers(copies):
                if line not in before.split('\n')]
     assert len(changed) == 1 and 'deltanet' in changed[0]
     assert 'speed-up 1.50x over 1 process x 2 threads' in changed[0]
+
+
+def test_the_out_of_core_row_follows_its_numbers(copies):
+    results, _ = copies
+    before = report.build_table(str(results))
+
+    def grown(data):
+        largest = max(r['size'] for r in data['rows'])
+        for r in data['rows']:
+            if r['arm'] == 'on_disk' and r['size'] == largest:
+                r['peak_mb'] = 98765.4
+        data['preparation']['identical'] = False
+
+    edit(results / 'out_of_core.json', grown)
+    after = report.build_table(str(results))
+    changed = [line for line in after.split('\n')
+               if line not in before.split('\n')]
+    assert len(changed) == 1
+    assert ', 98765 MB (' in changed[0]
+    assert 'identical databases: NO' in changed[0]

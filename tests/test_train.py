@@ -363,3 +363,49 @@ def test_deltanet_segmentation_on_synthetic_parts(tmp_path):
     # the data set's category-to-parts map gives the instance mIoU
     assert 0 <= metrics['final_test_miou'] <= 1
     assert 0 <= metrics['final_test_accuracy'] <= 1
+
+
+def _assert_same_examples(first, second):
+    assert len(first) == len(second)
+    for a, b in zip(first, second):
+        assert type(a) is type(b)
+        assert sorted(a.keys()) == sorted(b.keys())
+        for key in a.keys():
+            if isinstance(a[key], torch.Tensor):
+                assert torch.equal(a[key], b[key]), key
+            else:
+                assert a[key] == b[key], key
+
+
+def test_workers_prepare_the_same_inputs(tmp_path, modelnet_root):
+    # DeltaNet's inputs (points, normals, MLS operators) prepared in this
+    # process and by two worker processes
+    argv = TINY + ['--out', str(tmp_path / 'run')]
+    one = train_module.build_point_sets(parse_args(
+        argv + ['--root', str(modelnet_root)]))
+    two = train_module.build_point_sets(parse_args(
+        argv + ['--root', str(tmp_path / 'two'), '--workers', '2']))
+    for split in (0, 1):
+        _assert_same_examples(one[split], two[split])
+    with pytest.raises(SystemExit):
+        parse_args(argv + ['--workers', '0'])
+
+
+def test_on_disk_training_equals_in_memory(tmp_path, modelnet_root):
+    # the same weights after training from the database as from the list
+    run(tmp_path, '--epochs', '1', *RANDOM, root=modelnet_root,
+        out=tmp_path / 'memory')
+    run(tmp_path, '--epochs', '1', *RANDOM, '--on-disk', root=modelnet_root,
+        out=tmp_path / 'disk')
+    assert_same_run(checkpoint(tmp_path / 'memory'),
+                    checkpoint(tmp_path / 'disk'))
+    # it trained from the database, which holds the in-memory examples
+    cache = train_module.build_point_sets(parse_args(
+        TINY + ['--root', str(modelnet_root), '--out', str(tmp_path)]))
+    disk = train_module.build_point_sets(parse_args(
+        TINY + ['--root', str(modelnet_root), '--out', str(tmp_path),
+                '--on-disk']))
+    assert type(disk[0]).__name__ == 'PrecomputedOnDisk'
+    for split in (0, 1):
+        _assert_same_examples(cache[split], [disk[split][i] for i in
+                                             range(len(disk[split]))])

@@ -211,29 +211,162 @@ def _cache_path(args, kind: str, sets, settings) -> str:
         key.encode()).hexdigest()[:16] + '.pt')
 
 
-def _prepare_all(sets, prepare, cache: str, quiet: bool):
+def _prepare_all(sets, prepare, cache: str, quiet: bool, workers: int = 1,
+                 on_disk: bool = False):
+    """``prepare(data, split, index)`` of every shape of the train and test
+    sets, by ``workers`` processes (the same for any number): two lists
+    cached in the file ``cache``, or, ``on_disk``, two
+    :class:`~tg_intrinsic.datasets.PrecomputedOnDisk` data sets in the
+    folder beside it (``<cache>_on_disk/train`` and ``test``)."""
+    from tg_intrinsic.parallel import parallel_map
+    splits = ('train', 'test')
+    if on_disk:
+        from tg_intrinsic.datasets.precomputed_on_disk import \
+            PrecomputedOnDisk
+        folder = os.path.splitext(cache)[0] + '_on_disk'
+        return [PrecomputedOnDisk(os.path.join(folder, split),
+                                  _Enumerated(dataset, split),
+                                  _Unpack(prepare), workers=workers,
+                                  log=not quiet)
+                for split, dataset in zip(splits, sets)]
     if os.path.exists(cache):
         return torch.load(cache, weights_only=False)
-    out = []
-    for split, dataset in zip(('train', 'test'), sets):
-        out.append([prepare(dataset[i], split, i) for i in tqdm(
-            range(len(dataset)), desc=f'preparing {split}', disable=quiet,
-            leave=False)])
+    # one pool for both splits
+    items = [_Enumerated(dataset, split)
+             for split, dataset in zip(splits, sets)]
+    done = list(parallel_map(_Unpack(prepare), _Chain(items), workers,
+                             desc='preparing', log=not quiet, unit='shape',
+                             name_of=lambda index, item: None))
+    out = [done[:len(items[0])], done[len(items[0]):]]
     os.makedirs(os.path.dirname(cache), exist_ok=True)
     atomic_torch_save(out, cache)
     return out
 
 
-def _name_errors(prepare):
-    """Wraps ``prepare(data, split, index)`` so that a failure names the
-    shape (its file when the data set knows it)."""
-    def wrapped(data, split, index):
+class _Enumerated:
+    """The items ``(data, split, index)`` of one split (picklable)."""
+    def __init__(self, dataset, split: str):
+        self.dataset, self.split = dataset, split
+
+    def __len__(self) -> int:
+        return len(self.dataset)
+
+    def __getitem__(self, index: int):
+        if not 0 <= index < len(self.dataset):
+            raise IndexError(index)
+        return self.dataset[index], self.split, index
+
+
+class _Chain:
+    """The items of several sequences, one after the other."""
+    def __init__(self, parts):
+        self.parts = parts
+
+    def __len__(self) -> int:
+        return sum(len(part) for part in self.parts)
+
+    def __iter__(self):
+        for part in self.parts:
+            for index in range(len(part)):
+                yield part[index]
+
+
+class _Unpack:
+    """``prepare(*item)`` for the items of :class:`_Enumerated`."""
+    def __init__(self, prepare):
+        self.prepare = prepare
+
+    def __call__(self, item):
+        return self.prepare(*item)
+
+    def __repr__(self) -> str:
+        return repr(self.prepare)
+
+
+class _NamedErrors:
+    """``prepare(data, split, index)`` whose failures name the shape (its
+    file when the data set knows it)."""
+    def __init__(self, prepare):
+        self.prepare = prepare
+
+    def __call__(self, data, split, index):
         try:
-            return prepare(data, split, index)
+            return self.prepare(data, split, index)
         except ValueError as error:
             where = getattr(data, 'path', None) or f'{split} shape {index}'
             raise ValueError(f"{where}: {error}") from error
-    return wrapped
+
+    def __repr__(self) -> str:
+        return repr(self.prepare)
+
+
+def _name_errors(prepare):
+    """Wraps ``prepare(data, split, index)`` so that a failure names the
+    shape (its file when the data set knows it); picklable when
+    ``prepare`` is."""
+    return _NamedErrors(prepare)
+
+
+class _PreparePoints:
+    """DeltaNet's preparation of one shape (see :func:`build_point_sets`),
+    a picklable callable for the worker processes."""
+    def __init__(self, num_points: int, k: int, regularizer: float,
+                 data_seed: int, task: str):
+        self.num_points, self.k, self.regularizer = num_points, k, regularizer
+        self.data_seed, self.task = data_seed, task
+
+    def __call__(self, data, split, index):
+        from tg_intrinsic.geometry import estimate_normals, fps
+        from tg_intrinsic.geometry.pointcloud.sampling import sample_surface
+        from tg_intrinsic.transforms import MLSOperators
+        seed = [self.data_seed, ('train', 'test').index(split), index]
+        generator = torch.Generator().manual_seed(int(
+            np.random.SeedSequence(seed).generate_state(1)[0]))
+        out = Data(y=data.y)
+        if getattr(data, 'face', None) is not None:
+            pos, normal, chosen, bary = sample_surface(
+                data.pos.double(), data.face, self.num_points,
+                generator=generator)
+            if self.task == 'segmentation':
+                corner = data.face[bary.argmax(1), chosen]
+                out.y = data.y[corner]
+        else:
+            pos = data.pos.double()
+            normal = getattr(data, 'normal', None)
+            if pos.size(0) < self.num_points:
+                raise ValueError(f"has {pos.size(0)} points, fewer than "
+                                 f"--num-points {self.num_points}")
+            if pos.size(0) > self.num_points:
+                keep = fps(pos, self.num_points / pos.size(0),
+                           random_start=False)[:self.num_points]
+                pos = pos[keep]
+                normal = None if normal is None else normal[keep]
+                if self.task == 'segmentation':
+                    out.y = data.y[keep]
+            if normal is None:
+                normal = estimate_normals(pos, k=10)
+        out.pos, out.normal = pos.float(), normal.float()
+        for key in ('category', 'path'):
+            if key in data:
+                out[key] = data[key]
+        return MLSOperators(self.k, self.regularizer)(NormalizeScale()(out))
+
+    def __repr__(self) -> str:
+        return (f'{type(self).__name__}(num_points={self.num_points}, '
+                f'k={self.k}, regularizer={self.regularizer}, '
+                f'data_seed={self.data_seed}, task={self.task!r})')
+
+
+class _Pipeline:
+    """``pipeline(data)`` called as ``prepare(data, split, index)``."""
+    def __init__(self, pipeline):
+        self.pipeline = pipeline
+
+    def __call__(self, data, split, index):
+        return self.pipeline(data)
+
+    def __repr__(self) -> str:
+        return repr(self.pipeline)
 
 
 def build_point_sets(args):
@@ -244,59 +377,25 @@ def build_point_sets(args):
     seeded by (data seed, split, index); per-vertex labels go to each point
     from its triangle's nearest corner. Point clouds with more points keep
     their farthest-point subset; without normals they are estimated.
-    Cached under ``root/deltanet_cache``."""
-    from tg_intrinsic.geometry import estimate_normals, fps
-    from tg_intrinsic.geometry.pointcloud.sampling import sample_surface
-    from tg_intrinsic.transforms import MLSOperators
+    Cached under ``root/deltanet_cache`` (prepared by ``args.workers``
+    processes; stored on disk with ``args.on_disk``)."""
     sets = source_splits(args)
-    operators = MLSOperators(args.k, args.regularizer)
-    normalize = NormalizeScale()
-
-    def prepare(data, split, index):
-        seed = [args.data_seed, ('train', 'test').index(split), index]
-        generator = torch.Generator().manual_seed(int(
-            np.random.SeedSequence(seed).generate_state(1)[0]))
-        out = Data(y=data.y)
-        if getattr(data, 'face', None) is not None:
-            pos, normal, chosen, bary = sample_surface(
-                data.pos.double(), data.face, args.num_points,
-                generator=generator)
-            if args.task == 'segmentation':
-                corner = data.face[bary.argmax(1), chosen]
-                out.y = data.y[corner]
-        else:
-            pos = data.pos.double()
-            normal = getattr(data, 'normal', None)
-            if pos.size(0) < args.num_points:
-                raise ValueError(f"has {pos.size(0)} points, fewer than "
-                                 f"--num-points {args.num_points}")
-            if pos.size(0) > args.num_points:
-                keep = fps(pos, args.num_points / pos.size(0),
-                           random_start=False)[:args.num_points]
-                pos = pos[keep]
-                normal = None if normal is None else normal[keep]
-                if args.task == 'segmentation':
-                    out.y = data.y[keep]
-            if normal is None:
-                normal = estimate_normals(pos, k=10)
-        out.pos, out.normal = pos.float(), normal.float()
-        for key in ('category', 'path'):
-            if key in data:
-                out[key] = data[key]
-        return operators(normalize(out))
-
+    prepare = _PreparePoints(args.num_points, args.k, args.regularizer,
+                             args.data_seed, args.task)
     cache = _cache_path(args, 'deltanet', sets,
                         [args.num_points, args.k, args.regularizer,
                          args.data_seed])
-    train_items, test_items = _prepare_all(sets, _name_errors(prepare),
-                                           cache, args.quiet)
+    train_items, test_items = _prepare_all(
+        sets, _name_errors(prepare), cache, args.quiet,
+        getattr(args, 'workers', 1), getattr(args, 'on_disk', False))
     return train_items, test_items, sets[0]
 
 
 def build_mesh_datasets(args):
     """HSN's train and test examples: every mesh precomputed by
     :func:`hsn_pipeline` (the vertices are the points), cached under
-    ``root/hsn_cache``."""
+    ``root/hsn_cache`` (prepared by ``args.workers`` processes; stored on
+    disk with ``args.on_disk``)."""
     sets = source_splits(args)
     pipeline = hsn_pipeline(args.radius, args.rings, args.max_order,
                             args.logmap_method, args.resample_vertices)
@@ -304,8 +403,8 @@ def build_mesh_datasets(args):
                         [args.num_vertices, args.shapes_per_class,
                          repr(pipeline)])
     train_items, test_items = _prepare_all(
-        sets, _name_errors(lambda data, split, index: pipeline(data)),
-        cache, args.quiet)
+        sets, _name_errors(_Pipeline(pipeline)), cache, args.quiet,
+        getattr(args, 'workers', 1), getattr(args, 'on_disk', False))
     return train_items, test_items, sets[0]
 
 
@@ -775,6 +874,13 @@ def add_arguments(parser, model_and_dataset: bool = True):
         'faster but differs from one process with the same batch')
     if model_and_dataset:
         add('--quiet', action='store_true', help='no progress bar')
+    add('--workers', type=int, default=1,
+        help='processes that prepare the inputs (operators, log maps), one '
+        'thread each; the inputs do not depend on it (default: 1)')
+    add('--on-disk', action='store_true',
+        help='keep the prepared inputs in an on-disk database '
+        '(PrecomputedOnDisk under --root) and train from it, so memory '
+        'stays bounded as the data set grows; same results as in memory')
 
 
 def check_arguments(args, parser):
@@ -834,6 +940,8 @@ def check_arguments(args, parser):
         parser.error(f"--max-angle must be at most 180, got {args.max_angle}")
     if min(args.conv_channels + args.hsn_channels) < 1:
         parser.error("channel counts must be at least 1")
+    if args.workers < 1:
+        parser.error(f"--workers must be at least 1, got {args.workers}")
     return args
 
 

@@ -157,3 +157,22 @@ def test_manifest_notices_changes(tmp_path):
     assert len(PointCloudFolder(str(tmp_path), log=False)) == 4
     assert len(PointCloudFolder(str(tmp_path), log=False,
                                 force_reload=True)) == 4
+
+
+def test_workers_give_identical_files(tmp_path):
+    # the pre-transform (operators) runs in two worker processes
+    import shutil
+    from tg_intrinsic.transforms import MLSOperators
+    classification_tree(tmp_path / 'one')
+    shutil.copytree(tmp_path / 'one', tmp_path / 'two')
+    one = PointCloudFolder(str(tmp_path / 'one'), 'train', log=False,
+                           pre_transform=MLSOperators(k=8))
+    two = PointCloudFolder(str(tmp_path / 'two'), 'train', log=False,
+                           pre_transform=MLSOperators(k=8), workers=2)
+    assert len(two) == 4 and 'grad_weight' in two[0]
+    with open(one.processed_paths[0], 'rb') as a, \
+            open(two.processed_paths[0], 'rb') as b:
+        assert a.read() == b.read()
+    with pytest.raises(TypeError, match='PointCloudFolder: the pre_filter'):
+        PointCloudFolder(str(tmp_path / 'two'), 'test', log=False,
+                         pre_filter=lambda data: True, workers=2)

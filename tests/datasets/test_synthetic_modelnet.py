@@ -133,3 +133,31 @@ def test_a_pre_transform_is_never_skipped_by_an_older_cache(tmp_path):
                               pre_transform=MLSOperators(k=6))
     assert other[0].edge_index.size(1) == 6 * other[0].num_nodes
     assert torch.equal(plain[0].pos, pre[0].pos)
+
+
+def _bytes(path):
+    with open(path, 'rb') as f:
+        return f.read()
+
+
+def test_workers_give_identical_files(tmp_path):
+    from tg_intrinsic.transforms import MLSOperators
+    kwargs = dict(num_points=64, num_per_class=(1, 1), log=False,
+                  pre_transform=MLSOperators(k=8))
+    one = SyntheticModelNet(str(tmp_path / 'one'), **kwargs)
+    two = SyntheticModelNet(str(tmp_path / 'two'), workers=2, **kwargs)
+    assert 'grad_weight' in two[0]
+    for a, b in zip(one.processed_paths, two.processed_paths):
+        assert _bytes(a) == _bytes(b)
+
+
+def test_unpicklable_pre_transform_says_what_to_do(tmp_path):
+    kwargs = dict(num_points=32, num_per_class=(1, 1), log=False,
+                  pre_transform=lambda data: data)
+    with pytest.raises(TypeError, match='SyntheticModelNet: the '
+                       'pre_transform .* cannot be sent to worker '
+                       'processes .*pass workers=1'):
+        SyntheticModelNet(str(tmp_path), workers=2, **kwargs)
+    assert len(SyntheticModelNet(str(tmp_path), workers=1, **kwargs)) == 12
+    with pytest.raises(ValueError, match="'workers'"):
+        SyntheticModelNet(str(tmp_path), workers=0, **kwargs)

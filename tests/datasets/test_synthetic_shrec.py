@@ -131,3 +131,14 @@ def test_bad_arguments(tmp_path):
         SyntheticSHREC(str(tmp_path), num_vertices=(2000, 500))
     with pytest.raises(ValueError, match='seed'):
         SyntheticSHREC(str(tmp_path), seed=-1)
+
+
+def test_workers_give_identical_files(tmp_path):
+    kwargs = dict(num_per_class=2, num_train_per_class=1,
+                  num_vertices=(100, 120), log=False)
+    one = SyntheticSHREC(str(tmp_path / 'one'), **kwargs)
+    two = SyntheticSHREC(str(tmp_path / 'two'), workers=2, **kwargs)
+    assert len(one.processed_paths) == 4
+    for a, b in zip(one.processed_paths, two.processed_paths):
+        with open(a, 'rb') as fa, open(b, 'rb') as fb:
+            assert fa.read() == fb.read()

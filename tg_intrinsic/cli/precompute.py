@@ -21,7 +21,7 @@ from typing import Dict, List, Optional, Tuple
 
 from .common import (ArgumentParser, UsageError, common_options, default_of,
                      nonnegative_float, nonnegative_int, one_line,
-                     positive_float, positive_int, progress)
+                     positive_float, positive_int)
 
 HELP = 'precompute operators, log maps or hierarchies for a folder of meshes'
 EXAMPLE = """examples:
@@ -239,18 +239,6 @@ def _work(task) -> Tuple[str, Optional[str], Optional[str]]:
                 f"{one_line(error)}", traceback.format_exc())
 
 
-def _single_thread(threads: Tuple[int, int] = (1, 1)) -> Tuple[int, int]:
-    """One thread per file (torch and numba), in workers and in the main
-    process alike, so the results are the same whatever --workers is.
-    Returns the previous (torch, numba) thread counts."""
-    import numba
-    import torch
-    previous = (torch.get_num_threads(), numba.get_num_threads())
-    torch.set_num_threads(threads[0])
-    numba.set_num_threads(threads[1])
-    return previous
-
-
 # ----------------------------------------------------------------------
 # Files, manifest, pool
 
@@ -350,50 +338,32 @@ def _done(source: str, target: str) -> bool:
         os.path.getmtime(target) >= os.path.getmtime(source)
 
 
-def _pool_context():
-    import multiprocessing
-    if 'forkserver' in multiprocessing.get_all_start_methods():
-        context = multiprocessing.get_context('forkserver')
-        # the server imports these once; every worker forks with them
-        context.set_forkserver_preload(['torch', 'torch_geometric',
-                                        'tg_intrinsic.transforms',
-                                        'tg_intrinsic.io'])
-        return context
-    return multiprocessing.get_context('spawn')
+def _debug_work(task) -> Tuple[str, Optional[str], Optional[str]]:
+    """:func:`precompute_file` that lets the traceback through."""
+    precompute_file(*task)
+    return task[2], None, None
 
 
 def run_tasks(tasks, workers: int, quiet: bool, debug: bool, desc: str):
-    """Runs ``_work`` over ``tasks``; yields its results as they come."""
-    if workers == 1 or len(tasks) == 1:
-        threads = _single_thread()
-        try:
-            for task in progress(tasks, desc, quiet, unit='file'):
-                if debug:  # let the traceback through
-                    precompute_file(*task)
-                    yield task[2], None, None
-                else:
-                    yield _work(task)
-        finally:
-            _single_thread(threads)
-        return
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    from concurrent.futures.process import BrokenProcessPool
-    pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)),
-                               mp_context=_pool_context(),
-                               initializer=_single_thread)
+    """Runs ``_work`` over ``tasks`` with
+    :func:`tg_intrinsic.parallel.parallel_map`; yields ``(source, reason
+    or None, traceback or None)`` in the order of ``tasks``. A worker
+    process that dies fails its file and the ones after it (a rerun
+    resumes)."""
+    from tg_intrinsic.parallel import WorkerDied, parallel_map
+    work = _debug_work if debug and (workers == 1 or len(tasks) == 1) \
+        else _work
+    done = 0
     try:
-        futures = {pool.submit(_work, task): task for task in tasks}
-        for future in progress(as_completed(futures), desc, quiet,
-                               total=len(futures), unit='file'):
-            try:
-                yield future.result()
-            except BrokenProcessPool:
-                yield (futures[future][2], 'its worker process died (out of '
-                       'memory? try fewer --workers)', None)
-    except BaseException:
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    pool.shutdown(wait=True)
+        for result in parallel_map(work, tasks, workers, desc=desc,
+                                   log=not quiet, unit='file',
+                                   name_of=lambda _, task: task[2]):
+            done += 1
+            yield result
+    except WorkerDied:
+        for task in tasks[done:]:
+            yield (task[2], 'its worker process died (out of memory? try '
+                   'fewer --workers)', None)
 
 
 def run(args):

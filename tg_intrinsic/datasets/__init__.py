@@ -27,6 +27,8 @@ r"""Offline, deterministic datasets of curved surfaces (no downloads).
   :func:`correspondence_accuracy`.
 * :class:`SphereDigits`: scikit-learn's 8 x 8 digits on an icosphere,
   upright or rotated (HSN's rotated MNIST on a sphere).
+* :class:`PrecomputedOnDisk`: precomputed examples (operators, log maps,
+  hierarchies) in an on-disk database, written by parallel workers.
 """
 from .synthetic_shrec import SyntheticSHREC
 from .synthetic_modelnet import SyntheticModelNet
@@ -42,6 +44,7 @@ from .synthetic_parts import SyntheticShapeParts
 from .synthetic_correspondence import (SyntheticCorrespondence,
                                        correspondence_accuracy)
 from .sphere_digits import SphereDigits
+from .precomputed_on_disk import PrecomputedOnDisk
 
 __all__ = [
     'SyntheticSHREC',
@@ -59,4 +62,5 @@ __all__ = [
     'SyntheticCorrespondence',
     'correspondence_accuracy',
     'SphereDigits',
+    'PrecomputedOnDisk',
 ]

@@ -1,4 +1,5 @@
 """Helpers shared by the datasets (private)."""
+import copy
 import hashlib
 import json
 import os
@@ -12,6 +13,7 @@ from tqdm.auto import tqdm
 
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry.checks import check_positive_int
+from tg_intrinsic.parallel import check_picklable, parallel_map
 
 
 def processing_suffix(pre_transform, pre_filter) -> str:
@@ -47,26 +49,85 @@ class GeneratedDataset(InMemoryDataset):
         """Generates shape ``j`` of every group (class, category)
         ``c < groups`` with ``self.generate(c, j)``, the first
         ``counts[0]`` of a group for training and the next ``counts[1]``
-        for testing, applies the pre-filter and the pre-transform, and
-        saves the two splits to :attr:`processed_paths` atomically."""
+        for testing, applies the pre-filter and the pre-transform (in
+        ``self.workers`` processes, see :func:`map_examples`), and saves
+        the two splits to :attr:`processed_paths` atomically."""
         train, test = counts
+        keys = [(c, j) for c in range(groups) for j in range(train + test)]
         lists = ([], [])
-        with tqdm(total=groups * (train + test), desc=desc,
-                  disable=not self.log, unit='shape') as bar:
-            for c in range(groups):
-                for j in range(train + test):
-                    data = self.generate(c, j)
-                    bar.update(1)
-                    if self.pre_filter is not None and \
-                            not self.pre_filter(data):
-                        continue
-                    if self.pre_transform is not None:
-                        data = self.pre_transform(data)
-                    lists[0 if j < train else 1].append(data)
+        results = map_examples(self, _Generate(worker_copy(self)), keys,
+                               desc, 'shape', lambda _, key:
+                               f'{type(self).__name__} group {key[0]} '
+                               f'shape {key[1]}')
+        for (_, j), data in zip(keys, results):
+            if data is not None:
+                lists[0 if j < train else 1].append(data)
         for data_list, path in zip(lists, self.processed_paths):
             if len(data_list) == 0:
                 raise ValueError("'pre_filter' removed every shape of a split")
             save_atomic(type(self), data_list, path)
+
+
+def check_workers(workers) -> int:
+    """A positive number of worker processes."""
+    return check_positive_int(workers, 'workers', 1)
+
+
+def worker_copy(dataset):
+    """A shallow copy of ``dataset`` to send to worker processes: without
+    its on-access ``transform`` (not needed there, and maybe not
+    picklable) and without loaded data."""
+    light = copy.copy(dataset)
+    light.transform = None
+    for name in ('_data', 'slices', '_data_list'):
+        if name in vars(light):
+            setattr(light, name, None)
+    return light
+
+
+def preprocess(dataset, data):
+    """``data`` after the ``pre_filter`` (``None`` if it drops it) and the
+    ``pre_transform`` of ``dataset``."""
+    if dataset.pre_filter is not None and not dataset.pre_filter(data):
+        return None
+    if dataset.pre_transform is not None:
+        data = dataset.pre_transform(data)
+    return data
+
+
+def map_examples(dataset, function, items, desc: str, unit: str,
+                 name_of=None):
+    """:func:`~tg_intrinsic.parallel.parallel_map` of ``function`` over
+    ``items`` with ``dataset.workers`` processes and ``dataset.log``; with
+    more than one worker, a pre-transform or pre-filter that cannot be
+    pickled is named in a :class:`TypeError` that says what to do."""
+    workers = getattr(dataset, 'workers', 1)
+    if workers > 1 and len(items) > 1:
+        for what in ('pre_transform', 'pre_filter'):
+            value = getattr(dataset, what, None)
+            if value is not None:
+                check_picklable(value, what, type(dataset).__name__)
+    return parallel_map(function, items, workers, desc=desc,
+                        log=dataset.log, unit=unit, name_of=name_of)
+
+
+class _Generate:
+    """``dataset.generate(c, j)``, pre-filtered and pre-transformed (the
+    work of one shape in a worker process)."""
+    def __init__(self, dataset):
+        self.dataset = dataset
+
+    def __call__(self, key):
+        return preprocess(self.dataset, self.dataset.generate(*key))
+
+
+class _Preprocess:
+    """The pre-filter and pre-transform of ``dataset`` on one example."""
+    def __init__(self, dataset):
+        self.dataset = dataset
+
+    def __call__(self, data):
+        return preprocess(self.dataset, data)
 
 
 def check_option(value, name, options):
@@ -215,8 +276,9 @@ class FolderDataset(InMemoryDataset):
     SPLITS = ('train', 'test')
 
     def __init__(self, root, split, transform, pre_transform, pre_filter,
-                 log, force_reload):
+                 log, force_reload, workers: int = 1):
         self.split = check_split(split, self.SPLITS)
+        self.workers = check_workers(workers)
         root = osp.expanduser(os.fspath(root))
         if not osp.isdir(root):
             raise ValueError(f"{type(self).__name__}: '{root}' is not a "
@@ -281,14 +343,17 @@ class FolderDataset(InMemoryDataset):
     def process(self):
         from tg_intrinsic.utils import atomic_write_json
         data_list, meta = self.read()
-        if self.pre_filter is not None:
-            data_list = [d for d in data_list if self.pre_filter(d)]
+        if self.pre_filter is not None or self.pre_transform is not None:
+            name = type(self).__name__
+            data_list = [data for data in map_examples(
+                self, _Preprocess(worker_copy(self)), data_list,
+                f'Pre-processing {name} ({self.split})', 'example',
+                lambda index, data: getattr(data, 'path', None) or
+                f'{name} example {index}') if data is not None]
             if not data_list:
-                raise ValueError(f"{type(self).__name__}: 'pre_filter' "
-                                 f"removed every example of split "
-                                 f"'{self.split}' in '{self.root}'")
-        if self.pre_transform is not None:
-            data_list = [self.pre_transform(d) for d in data_list]
+                raise ValueError(f"{name}: 'pre_filter' removed every "
+                                 f"example of split '{self.split}' in "
+                                 f"'{self.root}'")
         save_atomic(type(self), data_list, self.processed_paths[0])
         atomic_write_json(self.processed_paths[1], meta)
         atomic_write_json(self.processed_paths[2], self.manifest)

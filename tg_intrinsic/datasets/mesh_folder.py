@@ -145,6 +145,9 @@ class MeshFolder(FolderDataset):
         log (bool, optional): Print progress. (default: :obj:`True`)
         force_reload (bool, optional): Re-read the files.
             (default: :obj:`False`)
+        workers (int, optional): Processes that apply the pre-filter and
+            the pre-transform, one thread each; the result does not depend
+            on it. (default: :obj:`1`)
 
     Raises:
         ValueError: if :obj:`root` is not a folder or does not follow the
@@ -175,6 +178,7 @@ class MeshFolder(FolderDataset):
         pre_filter=None,
         log: bool = True,
         force_reload: bool = False,
+        workers: int = 1,
     ):
         self.task = check_task(task, label_kind=(label_kind, 'auto'),
                                label_offset=(label_offset, None),
@@ -186,7 +190,7 @@ class MeshFolder(FolderDataset):
         self.num_classes_arg = None if num_classes is None else \
             check_positive_int(num_classes, 'num_classes', 1)
         super().__init__(root, split, transform, pre_transform, pre_filter,
-                         log, force_reload)
+                         log, force_reload, workers)
         self.classes: Optional[List[str]] = self.meta['classes']
 
     @property

@@ -66,6 +66,9 @@ class ModelNetResampled(FolderDataset):
         log (bool, optional): Print progress. (default: :obj:`True`)
         force_reload (bool, optional): Re-read the files.
             (default: :obj:`False`)
+        workers (int, optional): Processes that apply the pre-filter and
+            the pre-transform, one thread each; the result does not depend
+            on it. (default: :obj:`1`)
 
     Raises:
         ValueError: naming the file: a missing list or shape file, a shape
@@ -82,12 +85,12 @@ class ModelNetResampled(FolderDataset):
     def __init__(self, root: str, split: str = 'train', num_classes: int = 40,
                  num_points: int = 1024, transform=None, pre_transform=None,
                  pre_filter=None, log: bool = True,
-                 force_reload: bool = False):
+                 force_reload: bool = False, workers: int = 1):
         self.num_classes_arg = check_option(num_classes, 'num_classes',
                                             (40, 10))
         self.num_points = check_positive_int(num_points, 'num_points', 1)
         super().__init__(root, split, transform, pre_transform, pre_filter,
-                         log, force_reload)
+                         log, force_reload, workers)
         self.classes: List[str] = self.meta['classes']
 
     @property

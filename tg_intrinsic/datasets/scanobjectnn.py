@@ -66,6 +66,9 @@ class ScanObjectNN(FolderDataset):
         log (bool, optional): Print progress. (default: :obj:`True`)
         force_reload (bool, optional): Re-read the file.
             (default: :obj:`False`)
+        workers (int, optional): Processes that apply the pre-filter and
+            the pre-transform, one thread each; the result does not depend
+            on it. (default: :obj:`1`)
 
     Raises:
         ImportError: without h5py.
@@ -84,10 +87,10 @@ class ScanObjectNN(FolderDataset):
     def __init__(self, root: str, split: str = 'train',
                  variant: str = 'PB_T50_RS', transform=None,
                  pre_transform=None, pre_filter=None, log: bool = True,
-                 force_reload: bool = False):
+                 force_reload: bool = False, workers: int = 1):
         self.variant = check_option(variant, 'variant', VARIANTS)
         super().__init__(root, split, transform, pre_transform, pre_filter,
-                         log, force_reload)
+                         log, force_reload, workers)
 
     @property
     def cache_name(self) -> str:

@@ -76,6 +76,9 @@ class ShapeNetPartNormal(FolderDataset):
         log (bool, optional): Print progress. (default: :obj:`True`)
         force_reload (bool, optional): Re-read the files.
             (default: :obj:`False`)
+        workers (int, optional): Processes that apply the pre-filter and
+            the pre-transform, one thread each; the result does not depend
+            on it. (default: :obj:`1`)
 
     Raises:
         ValueError: on an unknown category, or naming the file: a missing
@@ -94,7 +97,8 @@ class ShapeNetPartNormal(FolderDataset):
     def __init__(self, root: str, split: str = 'trainval',
                  categories: Optional[Union[str, Sequence[str]]] = None,
                  transform=None, pre_transform=None, pre_filter=None,
-                 log: bool = True, force_reload: bool = False):
+                 log: bool = True, force_reload: bool = False,
+                 workers: int = 1):
         if isinstance(categories, str):
             categories = [categories]
         if categories is not None:
@@ -106,7 +110,7 @@ class ShapeNetPartNormal(FolderDataset):
             categories = sorted(set(categories), key=list(PART_COUNTS).index)
         self.selected = categories
         super().__init__(root, split, transform, pre_transform, pre_filter,
-                         log, force_reload)
+                         log, force_reload, workers)
         self.categories: List[str] = self.meta['categories']
         self.category_parts = {c: CATEGORY_PARTS[c] for c in self.categories}
         self.part_mask = torch.zeros(len(self.categories), NUM_PARTS,

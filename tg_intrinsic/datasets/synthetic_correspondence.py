@@ -6,13 +6,14 @@ import scipy.sparse as sp
 import torch
 from scipy.sparse.csgraph import connected_components
 from torch import Tensor
-from tqdm.auto import tqdm
 
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry.checks import check_positive_int
 
 from . import shrec_shapes as shapes
-from .common import GeneratedDataset, check_split, fmt, save_atomic, shape_rng
+from .common import (GeneratedDataset, check_split, check_workers, fmt,
+                     map_examples, preprocess, save_atomic, shape_rng,
+                     worker_copy)
 from .quadric_decimation import self_intersections
 
 
@@ -75,6 +76,9 @@ class SyntheticCorrespondence(GeneratedDataset):
             (default: :obj:`None`)
         log (bool, optional): Print progress. (default: :obj:`True`)
         force_reload (bool, optional): Regenerate. (default: :obj:`False`)
+        workers (int, optional): Processes that pose the template and
+            apply the pre-filter and the pre-transform, one thread each;
+            the result does not depend on it. (default: :obj:`1`)
 
     Shapes:
         - **pos** :math:`(N, 3)` float32, **face** :math:`(3, F)` int64
@@ -97,7 +101,8 @@ class SyntheticCorrespondence(GeneratedDataset):
                  permute: bool = False, seed: int = 0,
                  transform: Optional[Callable] = None,
                  pre_transform: Optional[Callable] = None,
-                 log: bool = True, force_reload: bool = False):
+                 log: bool = True, force_reload: bool = False,
+                 workers: int = 1):
         self.split = check_split(split)
         self.num_train = check_positive_int(num_train, 'num_train')
         self.num_test = check_positive_int(num_test, 'num_test')
@@ -110,6 +115,7 @@ class SyntheticCorrespondence(GeneratedDataset):
         self.pose = pose
         self.rotate, self.permute = bool(rotate), bool(permute)
         self.seed = check_positive_int(seed, 'seed', 0)
+        self.workers = check_workers(workers)
         super().__init__(root, transform, pre_transform, None, log=log,
                          force_reload=force_reload)
         self.load(self.processed_paths[('train', 'test').index(split)],
@@ -144,21 +150,16 @@ class SyntheticCorrespondence(GeneratedDataset):
             pos=torch.from_numpy(V).float(),
             face=torch.from_numpy(F).t().contiguous().long(),
             part=torch.from_numpy(part).long())
-        lists = []
-        total = self.num_train + self.num_test
-        with tqdm(total=total, desc='Generating SyntheticCorrespondence',
-                  disable=not self.log, unit='pose') as bar:
-            for split, count in (('train', self.num_train),
-                                 ('test', self.num_test)):
-                data_list = []
-                for k in range(count):
-                    rng = shape_rng(self.seed, 1 + (split == 'test'), k)
-                    data = self._pose(V, F, part, rig, rng)
-                    if self.pre_transform is not None:
-                        data = self.pre_transform(data)
-                    data_list.append(data)
-                    bar.update(1)
-                lists.append(data_list)
+        keys = [(split, k) for split, count in (('train', self.num_train),
+                                                ('test', self.num_test))
+                for k in range(count)]
+        desc = 'Generating SyntheticCorrespondence'
+        results = list(map_examples(
+            self, _Pose(worker_copy(self), (V, F, part, rig)), keys, desc,
+            'pose', lambda _, key: f'SyntheticCorrespondence {key[0]} pose '
+            f'{key[1]}'))
+        lists = [[data for (split, _), data in zip(keys, results)
+                  if split == name] for name in ('train', 'test')]
         for data_list, path in zip(lists, self.processed_paths):
             save_atomic(type(self), data_list, path)
         torch.save(template, self.processed_paths[2])
@@ -188,6 +189,19 @@ class SyntheticCorrespondence(GeneratedDataset):
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}({len(self)}, split={self.split!r},'
                 f' num_vertices={self.num_vertices}, seed={self.seed})')
+
+
+class _Pose:
+    """Pose ``(split, k)`` of the template, pre-transformed (the work of
+    one pose in a worker process)."""
+    def __init__(self, dataset, template):
+        self.dataset, self.template = dataset, template
+
+    def __call__(self, key):
+        split, k = key
+        rng = shape_rng(self.dataset.seed, 1 + (split == 'test'), k)
+        return preprocess(self.dataset,
+                          self.dataset._pose(*self.template, rng))
 
 
 def _adjacency(F, n):

@@ -10,7 +10,7 @@ from tg_intrinsic.geometry.pointcloud.neighbors import fps
 
 from . import modelnet_shapes as shapes
 from .common import (GeneratedDataset, check_fraction, check_split,
-                     check_split_counts, fmt, shape_rng)
+                     check_split_counts, check_workers, fmt, shape_rng)
 
 
 def sample_cloud(parts, num_points: int, oversample: int,
@@ -100,6 +100,9 @@ class SyntheticModelNet(GeneratedDataset):
         log (bool, optional): Print progress (a tqdm bar while generating).
             (default: :obj:`True`)
         force_reload (bool, optional): Regenerate. (default: :obj:`False`)
+        workers (int, optional): Processes that generate the shapes and
+            apply the pre-filter and the pre-transform, one thread each;
+            the result does not depend on it. (default: :obj:`1`)
 
     Shapes:
         - **pos** :math:`(N, 3)` float32 with :math:`N =`
@@ -138,6 +141,7 @@ class SyntheticModelNet(GeneratedDataset):
         pre_filter: Optional[Callable] = None,
         log: bool = True,
         force_reload: bool = False,
+        workers: int = 1,
     ):
         self.split = check_split(split)
         self.num_points = check_positive_int(num_points, 'num_points', 1)
@@ -147,6 +151,7 @@ class SyntheticModelNet(GeneratedDataset):
         self.scale_jitter = check_fraction(scale_jitter, 'scale_jitter')
         self.rotate_up = bool(rotate_up)
         self.seed = check_positive_int(seed, 'seed', 0)
+        self.workers = check_workers(workers)
         super().__init__(root, transform, pre_transform, pre_filter, log=log,
                          force_reload=force_reload)
         self.load(self.processed_paths[0 if split == 'train' else 1],

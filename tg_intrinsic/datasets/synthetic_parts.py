@@ -9,7 +9,7 @@ from tg_intrinsic.geometry.checks import check_positive_int
 
 from . import modelnet_shapes as shapes
 from .common import (GeneratedDataset, check_fraction, check_split,
-                     check_split_counts, fmt, shape_rng)
+                     check_split_counts, check_workers, fmt, shape_rng)
 from .synthetic_modelnet import sample_cloud
 
 #: Semantic parts of every category, in the order of the global labels.
@@ -96,6 +96,9 @@ class SyntheticShapeParts(GeneratedDataset):
             :obj:`True`. (default: :obj:`None`)
         log (bool, optional): Print progress. (default: :obj:`True`)
         force_reload (bool, optional): Regenerate. (default: :obj:`False`)
+        workers (int, optional): Processes that generate the shapes and
+            apply the pre-filter and the pre-transform, one thread each;
+            the result does not depend on it. (default: :obj:`1`)
 
     Shapes:
         - **pos** :math:`(N, 3)` float32, :math:`\max_i \|\mathbf{x}_i\|
@@ -138,6 +141,7 @@ class SyntheticShapeParts(GeneratedDataset):
         pre_filter: Optional[Callable] = None,
         log: bool = True,
         force_reload: bool = False,
+        workers: int = 1,
     ):
         self.split = check_split(split)
         self.num_points = check_positive_int(num_points, 'num_points', 1)
@@ -146,6 +150,7 @@ class SyntheticShapeParts(GeneratedDataset):
         self.oversample = check_positive_int(oversample, 'oversample', 1)
         self.scale_jitter = check_fraction(scale_jitter, 'scale_jitter')
         self.seed = check_positive_int(seed, 'seed', 0)
+        self.workers = check_workers(workers)
         self.part_mask = torch.zeros(len(self.categories), NUM_PARTS,
                                      dtype=torch.bool)
         for row, name in enumerate(self.categories):

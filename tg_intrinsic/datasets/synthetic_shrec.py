@@ -3,13 +3,14 @@ import os.path as osp
 from typing import Callable, Optional, Tuple
 
 import torch
-from tqdm.auto import tqdm
 
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry.checks import check_positive_int
 
 from . import shrec_shapes as shapes
-from .common import GeneratedDataset, check_split, fmt, save_atomic, shape_rng
+from .common import (GeneratedDataset, check_split, check_workers, fmt,
+                     map_examples, preprocess, save_atomic, shape_rng,
+                     worker_copy)
 
 
 class SyntheticSHREC(GeneratedDataset):
@@ -82,6 +83,9 @@ class SyntheticSHREC(GeneratedDataset):
         log (bool, optional): Print progress (a tqdm bar while generating).
             (default: :obj:`True`)
         force_reload (bool, optional): Regenerate. (default: :obj:`False`)
+        workers (int, optional): Processes that generate the shapes and
+            apply the pre-filter and the pre-transform, one thread each;
+            the result does not depend on it. (default: :obj:`1`)
 
     Shapes:
         - **pos** :math:`(N, 3)` float32, :math:`500 \leq N \leq 2000`
@@ -125,6 +129,7 @@ class SyntheticSHREC(GeneratedDataset):
         pre_filter: Optional[Callable] = None,
         log: bool = True,
         force_reload: bool = False,
+        workers: int = 1,
     ):
         self.split = check_split(split)
         if task not in ('classification', 'segmentation'):
@@ -154,6 +159,7 @@ class SyntheticSHREC(GeneratedDataset):
         self.noise = noise
         self.rotate = bool(rotate)
         self.seed = check_positive_int(seed, 'seed', 0)
+        self.workers = check_workers(workers)
         super().__init__(root, transform, pre_transform, pre_filter, log=log,
                          force_reload=force_reload)
         self.load(self.processed_paths[self._file_index(split, task)],
@@ -187,41 +193,53 @@ class SyntheticSHREC(GeneratedDataset):
         return len(self.classes)
 
     def process(self):
+        keys = [(c, j) for c in range(len(self.classes))
+                for j in range(self.num_per_class)]
         lists = [[] for _ in range(4)]
-        lo, hi = self.num_vertices
-        total = len(self.classes) * self.num_per_class
-        with tqdm(total=total, desc='Generating SyntheticSHREC',
-                  disable=not self.log, unit='shape') as bar:
-            for c, name in enumerate(self.classes):
-                for j in range(self.num_per_class):
-                    rng = shape_rng(self.seed, c, j)
-                    n = int(rng.integers(lo, hi + 1))
-                    V, F, lab = shapes.make_shape(name, rng, n,
-                                                  noise=self.noise,
-                                                  rotate=self.rotate)
-                    split = 'train' if j < self.num_train_per_class else 'test'
-                    pos = torch.from_numpy(V).float()
-                    face = torch.from_numpy(F).t().contiguous().long()
-                    y = torch.tensor([c], dtype=torch.long)
-                    cls = IntrinsicData(pos=pos, face=face, y=y)
-                    seg = IntrinsicData(pos=pos.clone(), face=face.clone(),
-                                        y=torch.from_numpy(lab).long(),
-                                        category=y.clone())
-                    for task, data in (('classification', cls),
-                                       ('segmentation', seg)):
-                        if self.pre_filter is not None and \
-                                not self.pre_filter(data):
-                            continue
-                        if self.pre_transform is not None:
-                            data = self.pre_transform(data)
-                        lists[self._file_index(split, task)].append(data)
-                    bar.update(1)
+        desc = 'Generating SyntheticSHREC'
+        results = map_examples(self, _Generate(worker_copy(self)), keys,
+                               desc, 'shape', lambda _, key:
+                               f'SyntheticSHREC {self.classes[key[0]]} '
+                               f'shape {key[1]}')
+        for (_, j), pair in zip(keys, results):
+            split = 'train' if j < self.num_train_per_class else 'test'
+            for task, data in zip(self._TASKS, pair):
+                if data is not None:
+                    lists[self._file_index(split, task)].append(data)
         for data_list, path in zip(lists, self.processed_paths):
             if len(data_list) == 0:
                 raise ValueError(f"'pre_filter' removed every shape of "
                                  f"{osp.basename(path)}")
             save_atomic(type(self), data_list, path)
 
+    def generate(self, c: int, j: int):
+        """Shape ``j`` of class ``c`` for classification and for
+        segmentation (without transforms)."""
+        lo, hi = self.num_vertices
+        rng = shape_rng(self.seed, c, j)
+        n = int(rng.integers(lo, hi + 1))
+        V, F, lab = shapes.make_shape(self.classes[c], rng, n,
+                                      noise=self.noise, rotate=self.rotate)
+        pos = torch.from_numpy(V).float()
+        face = torch.from_numpy(F).t().contiguous().long()
+        y = torch.tensor([c], dtype=torch.long)
+        cls = IntrinsicData(pos=pos, face=face, y=y)
+        seg = IntrinsicData(pos=pos.clone(), face=face.clone(),
+                            y=torch.from_numpy(lab).long(),
+                            category=y.clone())
+        return cls, seg
+
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}({len(self)}, split={self.split!r},'
                 f' task={self.task!r}, seed={self.seed})')
+
+
+class _Generate:
+    """Both tasks' versions of one shape, pre-filtered and pre-transformed
+    (the work of one shape in a worker process)."""
+    def __init__(self, dataset):
+        self.dataset = dataset
+
+    def __call__(self, key):
+        return [preprocess(self.dataset, data)
+                for data in self.dataset.generate(*key)]

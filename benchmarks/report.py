@@ -724,6 +724,43 @@ def gravo_applications(d, _):
              'gravo_applications.py', result)]
 
 
+@rows_for('gravo_scale')
+def gravo_scale(d, _):
+    def size(row):
+        return f"{row['vertices'] / 1e6:.1f}M"
+
+    parts = []
+    for row in d['rows']:
+        cells = []
+        for problem in ('poisson', 'smoothing'):
+            r = row[problem]
+            ours, original = r['ours'], r.get('original')
+            text = (f"{problem} {seconds(ours['seconds'])} s "
+                    f"({ours['iterations']} cycles)")
+            if original and 'original_failed' in r:
+                text += ' (original: NaN)'
+            elif original:
+                text += (f" vs {seconds(original['seconds'])} s "
+                         f"({original['iterations']}), "
+                         f"**{times(r['solve_ratio'], 2)}**")
+            cells.append(text)
+        r = row['poisson']
+        memory = f"{r['ours']['added_mb_per_million']:.0f}"
+        hierarchy = f"hierarchy {seconds(r['ours']['hierarchy_s'])} s"
+        if 'original' in r:
+            memory += f" vs {r['original']['added_mb_per_million']:.0f}"
+            hierarchy += (f" vs {seconds(r['original']['hierarchy_s'])} s "
+                          f"(**{times(r['hierarchy_ratio'], 2)}**)")
+        parts.append(f"{size(row)}: {hierarchy}; " + '; '.join(cells)
+                     + f"; {memory} MB per million vertices")
+    result = ('ours vs gravomg 0.0.4, same residual 1e-4: '
+              + ' | '.join(parts))
+    if d.get('gpu') is None:
+        result += ' (no GPU was available)'
+    return [('Gravo MG at scale: Loop-subdivided scans, time and peak '
+             'memory', 'gravo_scale.py', result)]
+
+
 @rows_for('hsn_accuracy')
 def hsn_accuracy(d, _):
     parts = []

@@ -1,7 +1,7 @@
 """Compiled kernels for GravoMG on the CPU: a bit-exact fingerprint of a
 sparse matrix for the per-matrix cache, the input checks (symmetry by
-random probes), a parallel sparse matrix-vector product (scipy's runs on
-one core) and the Galerkin product R A P in one parallel pass."""
+random probes), the matrix-vector product and the Galerkin product R A P
+in one parallel pass."""
 import numpy as np
 import scipy.sparse as sp
 from numba import get_num_threads, njit, prange
@@ -78,19 +78,11 @@ def check_matrix(A: sp.csr_matrix):
     return finite, scale, float(defect)
 
 
-@njit(cache=True, parallel=True)
-def _spmv(indptr, indices, data, x, out):  # pragma: no cover (numba)
-    for i in prange(indptr.shape[0] - 1):
-        total = 0.0
-        for p in range(indptr[i], indptr[i + 1]):
-            total += data[p] * x[indices[p]]
-        out[i] = total
-    return out
-
-
 def matvec(A: sp.csr_matrix, x: np.ndarray) -> np.ndarray:
-    """A @ x for a CSR matrix and a vector, rows in parallel."""
-    return _spmv(A.indptr, A.indices, A.data, x, np.empty(A.shape[0]))
+    """A @ x for a CSR matrix and a vector: scipy's serial product, which
+    beat a parallel numba one on this project's 2-core machine (1.9 vs
+    2.7 ms at 1.4M entries, 11 vs 18 ms at 5.6M)."""
+    return A @ x
 
 
 @njit(cache=True, parallel=True)

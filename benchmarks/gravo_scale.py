@@ -30,6 +30,7 @@ Goals (issue 19), at every size: hierarchy <= 1.0x and solve <= 0.8x the
 original's time, with no more cycles.
 
 Usage: python benchmarks/gravo_scale.py [--only NAME ...] [--repeats 2]
+       [--plot-only]
 Writes benchmarks/results/gravo_scale.json and gravo_scale.png.
 """
 import argparse
@@ -238,15 +239,25 @@ def plot(rows, path):
             axes[0].loglog(n, [v['hierarchy_s'] for v in values], line,
                            color=colour, marker='o',
                            label=f'{label}, {problem}')
-            axes[1].loglog(n, [v['seconds'] for v in values], line,
-                           color=colour, marker='o',
+            # a solve that returned NaN has no time to show
+            solved = [(k, v['seconds']) for k, v in zip(n, values)
+                      if np.isfinite(v['residual'])]
+            axes[1].loglog(*zip(*solved), line, color=colour, marker='o',
                            label=f'{label}, {problem}')
             axes[2].semilogx(n, [v['added_mb_per_million'] for v in values],
                              line, color=colour, marker='o',
                              label=f'{label}, {problem}')
     titles = ('hierarchy (s)', 'solve, new matrix (s)',
               'peak memory added (MB per million vertices)')
+    failed = [r['vertices'] for r in rows
+              if 'original_failed' in r['poisson']]
+    if failed:
+        axes[1].text(0.98, 0.04, 'gravomg 0.0.4 returns NaN at ' + ', '.join(
+            f'{k / 1e6:.1f}M' for k in failed), transform=axes[1].transAxes,
+            color='C3', ha='right', fontsize=8)
     for ax, title in zip(axes, titles):
+        ax.set_xscale('log')
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_xlabel('vertices')
         ax.set_title(title)
         ax.grid(alpha=0.3, which='both')
@@ -274,8 +285,12 @@ def main():
     parser.add_argument('--only', nargs='+', choices=list(SURFACES))
     parser.add_argument('--repeats', type=int, default=2)
     parser.add_argument('--out', default=os.path.join(HERE, 'results'))
+    parser.add_argument('--plot-only', action='store_true')
     args = parser.parse_args()
     path = os.path.join(args.out, 'gravo_scale.json')
+    if args.plot_only:
+        with open(path) as f:
+            return plot(json.load(f)['rows'], path[:-5] + '.png')
     if not os.path.exists(args.gravomg_python):
         print(f'no gravomg Python at {args.gravomg_python}: the original is '
               f'left out (make gravomg-env)')

@@ -751,10 +751,11 @@ def gravo_scale(d, _):
             memory += f" vs {r['original']['added_mb_per_million']:.0f}"
             hierarchy += (f" vs {seconds(r['original']['hierarchy_s'])} s "
                           f"(**{times(r['hierarchy_ratio'], 2)}**)")
-        parts.append(f"{size(row)}: {hierarchy}; " + '; '.join(cells)
-                     + f"; {memory} MB per million vertices")
-    result = ('ours vs gravomg 0.0.4, same residual 1e-4: '
-              + ' | '.join(parts))
+        parts.append(f"{size(row)} vertices: {hierarchy}; "
+                     + '; '.join(cells)
+                     + f"; peak memory {memory} MB per million vertices")
+    result = ('ours vs gravomg 0.0.4, same residual 1e-4. '
+              + '. '.join(parts))
     if d.get('gpu') is None:
         result += ' (no GPU was available)'
     return [('Gravo MG at scale: Loop-subdivided scans, time and peak '

@@ -232,3 +232,20 @@ def test_the_out_of_core_row_follows_its_numbers(copies):
     assert len(changed) == 1
     assert ', 98765 MB (' in changed[0]
     assert 'identical databases: NO' in changed[0]
+
+
+def test_the_gravo_scale_row_follows_its_numbers(copies):
+    results, _ = copies
+    before = report.build_table(str(results))
+
+    def slower_largest(data):
+        largest = data['rows'][-1]['poisson']
+        largest['solve_ratio'] = 1.37
+        largest['ours']['added_mb_per_million'] = 4321
+
+    edit(results / 'gravo_scale.json', slower_largest)
+    after = report.build_table(str(results))
+    changed = [line for line in after.split('\n')
+               if line not in before.split('\n')]
+    assert len(changed) == 1 and 'gravo_scale.py' in changed[0]
+    assert '**1.37x**' in changed[0] and '4321 vs' in changed[0]

@@ -127,7 +127,8 @@ def resolve_protocol(args) -> None:
 
 def source_splits(args):
     """The train and test splits of ``args.dataset`` as stored (meshes or
-    point clouds), before any preparation."""
+    point clouds), before any preparation; the generated sets are made by
+    ``args.workers`` processes."""
     from tg_intrinsic.datasets import (SyntheticModelNet, SyntheticSHREC,
                                        SyntheticShapeParts, open_folder)
     # generated point clouds: the class and its (train, test) count option
@@ -135,14 +136,16 @@ def source_splits(args):
               'synthetic_parts': (SyntheticShapeParts, 'num_per_category')}
     if args.dataset in clouds:
         cls, counts = clouds[args.dataset]
-        kwargs = dict(num_points=args.num_points, seed=args.data_seed)
+        kwargs = dict(num_points=args.num_points, seed=args.data_seed,
+                      workers=args.workers)
         if args.shapes_per_class is not None:
             half = max(1, args.shapes_per_class // 2)
             kwargs[counts] = (half, half)
         path = os.path.join(args.root, cls.__name__)
         return [cls(path, split, **kwargs) for split in ('train', 'test')]
     if args.dataset == 'synthetic_shrec':
-        kwargs = dict(seed=args.data_seed, task=args.task)
+        kwargs = dict(seed=args.data_seed, task=args.task,
+                      workers=args.workers)
         if args.num_vertices is not None:
             kwargs['num_vertices'] = tuple(args.num_vertices)
         if args.shapes_per_class is not None:
@@ -387,7 +390,7 @@ def build_point_sets(args):
                          args.data_seed])
     train_items, test_items = _prepare_all(
         sets, _name_errors(prepare), cache, args.quiet,
-        getattr(args, 'workers', 1), getattr(args, 'on_disk', False))
+        args.workers, args.on_disk)
     return train_items, test_items, sets[0]
 
 
@@ -404,7 +407,7 @@ def build_mesh_datasets(args):
                          repr(pipeline)])
     train_items, test_items = _prepare_all(
         sets, _name_errors(_Pipeline(pipeline)), cache, args.quiet,
-        getattr(args, 'workers', 1), getattr(args, 'on_disk', False))
+        args.workers, args.on_disk)
     return train_items, test_items, sets[0]
 
 

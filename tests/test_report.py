@@ -238,12 +238,14 @@ def test_the_gravo_scale_row_follows_its_numbers(copies):
     results, _ = copies
     before = report.build_table(str(results))
 
-    def slower_largest(data):
-        largest = data['rows'][-1]['poisson']
-        largest['solve_ratio'] = 1.37
-        largest['ours']['added_mb_per_million'] = 4321
+    def slower_and_larger(data):
+        # the original's time counts only where its answer is not NaN
+        compared = [r for r in data['rows']
+                    if 'original_failed' not in r['poisson']][-1]
+        compared['poisson']['solve_ratio'] = 1.37
+        compared['poisson']['ours']['added_mb_per_million'] = 4321
 
-    edit(results / 'gravo_scale.json', slower_largest)
+    edit(results / 'gravo_scale.json', slower_and_larger)
     after = report.build_table(str(results))
     changed = [line for line in after.split('\n')
                if line not in before.split('\n')]

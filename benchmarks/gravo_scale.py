@@ -56,11 +56,10 @@ from tg_intrinsic.geometry import (cotan_laplacian, lumped_mass,  # noqa
 from tg_intrinsic.solvers import GravoMG  # noqa: E402
 from tg_intrinsic.utils import atomic_write_json, machine_info  # noqa: E402
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-ORACLE = os.path.join(HERE, 'oracles', 'gravomg_oracle.py')
-TOL, MAX_ITER = 1e-4, 100
-PROBLEMS = {'poisson': (1e-6, 'S + 1e-6 M'), 'smoothing': (1e-3, 'M + 1e-3 S')}
+# the systems, tolerance and oracle of the side-by-side benchmark
+from gravo_mg import (HERE, MAX_ITER, ORACLE, PROBLEMS, ROOT,  # noqa: E402
+                      TOL, relative)
+
 SURFACES = {'koala-loop1': ('koala', 1), 'koala-loop2': ('koala', 2),
             'koala-loop3': ('koala', 3), 'falconstatue-loop4':
             ('falconstatue_boundary', 4)}
@@ -114,10 +113,6 @@ def load_problem(path, problem):
     A = (S + weight * M if problem == 'poisson' else M + weight * S).tocsr()
     b = m * np.random.default_rng(0).normal(size=n)
     return pos, face, m, A, b
-
-
-def relative(A, b, x):
-    return float(np.linalg.norm(b - A @ x) / np.linalg.norm(b))
 
 
 def warm_up():

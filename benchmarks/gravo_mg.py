@@ -231,9 +231,28 @@ def original(python, pos, face, graph, A, m, b, repeats):
                 'converged': int(out['iterations']) <= MAX_ITER,
                 'sizes': out['sizes'].tolist(),
                 'residual': relative(A, b, out['x']),
+                'base_mb': float(out['base_mb']),
+                'peak_mb': float(out['peak_mb']),
                 'history': [[int(k), float(t), float(r)] for k, t, r in
                             zip(out['cycles'], out['times'],
                                 out['residuals'])]}
+
+
+def add_original_option(parser):
+    """--gravomg-python: the Python that has gravomg 0.0.4."""
+    parser.add_argument('--gravomg-python', default=os.environ.get(
+        'TG_GRAVOMG_PYTHON', os.path.join(ROOT, '.gravomg-env', 'bin',
+                                          'python')))
+
+
+def original_python(args):
+    """args.gravomg_python, or None (with a message) when it is not
+    there."""
+    if os.path.exists(args.gravomg_python):
+        return args.gravomg_python
+    print(f'no gravomg Python at {args.gravomg_python}: the original is '
+          f'left out (make gravomg-env)')
+    return None
 
 
 def pyamg_solvers(A, b):
@@ -434,10 +453,7 @@ def main():
     parser = argparse.ArgumentParser()
     parser.add_argument('--meshes', default=os.path.join(
         ROOT, '..', 'shared', 'data', 'meshes'))
-    default_python = os.environ.get(
-        'TG_GRAVOMG_PYTHON', os.path.join(ROOT, '.gravomg-env', 'bin',
-                                          'python'))
-    parser.add_argument('--gravomg-python', default=default_python)
+    add_original_option(parser)
     parser.add_argument('--only', nargs='+')
     parser.add_argument('--repeats', type=int, default=2)
     parser.add_argument('--voronoi', default='exact',
@@ -450,10 +466,7 @@ def main():
     if args.plot_only:
         with open(path) as f:
             return plot(json.load(f)['rows'], path[:-5] + '.png')
-    if not os.path.exists(args.gravomg_python):
-        print(f'no gravomg Python at {args.gravomg_python}: the original is '
-              f'left out (make gravomg-env)')
-        args.gravomg_python = None
+    args.gravomg_python = original_python(args)
     # Compile the numba kernels outside the timings.
     pos, face = icosphere(3)
     GravoMG.from_points(pos, face[:, :2].T)

@@ -57,8 +57,9 @@ from tg_intrinsic.solvers import GravoMG  # noqa: E402
 from tg_intrinsic.utils import atomic_write_json, machine_info  # noqa: E402
 
 # the systems, tolerance and oracle of the side-by-side benchmark
-from gravo_mg import (HERE, MAX_ITER, ORACLE, PROBLEMS, ROOT,  # noqa: E402
-                      TOL, relative)
+from gravo_mg import (HERE, MAX_ITER, PROBLEMS, ROOT, TOL,  # noqa: E402
+                      add_original_option, original, original_python,
+                      relative)
 
 SURFACES = {'koala-loop1': ('koala', 1), 'koala-loop2': ('koala', 2),
             'koala-loop3': ('koala', 3), 'falconstatue-loop4':
@@ -174,24 +175,7 @@ def run_ours(system, problem, repeats):
 
 def run_original(python, system, problem, repeats):
     pos, face, m, A, b = load_problem(system, problem)
-    with tempfile.TemporaryDirectory() as tmp:
-        source = os.path.join(tmp, 'in.npz')
-        target = os.path.join(tmp, 'out.npz')
-        np.savez(source, pos=pos, face=face, data=A.data, indices=A.indices,
-                 indptr=A.indptr, m=m, b=b, tol=TOL, max_iter=MAX_ITER,
-                 repeats=repeats)
-        del pos, face
-        env = {k: v for k, v in os.environ.items() if k != 'PYTHONPATH'}
-        subprocess.run([python, ORACLE, source, target], check=True, env=env)
-        out = np.load(target)
-        return {'hierarchy_s': float(out['hierarchy_time']),
-                'seconds': float(out['solve_time']),
-                'iterations': int(out['iterations']),
-                'converged': int(out['iterations']) <= MAX_ITER,
-                'residual': relative(A, b, out['x']),
-                'base_mb': float(out['base_mb']),
-                'peak_mb': float(out['peak_mb']),
-                'levels': out['sizes'].tolist()}
+    return original(python, pos, face, None, A, m, b, repeats)
 
 
 def summarise(row, problem):
@@ -273,10 +257,7 @@ def main():
         ROOT, '..', 'shared', 'data', 'meshes'))
     parser.add_argument('--cache', default=os.path.join(ROOT, 'data',
                                                         'gravo_scale'))
-    default_python = os.environ.get(
-        'TG_GRAVOMG_PYTHON', os.path.join(ROOT, '.gravomg-env', 'bin',
-                                          'python'))
-    parser.add_argument('--gravomg-python', default=default_python)
+    add_original_option(parser)
     parser.add_argument('--only', nargs='+', choices=list(SURFACES))
     parser.add_argument('--repeats', type=int, default=2)
     parser.add_argument('--out', default=os.path.join(HERE, 'results'))
@@ -286,10 +267,7 @@ def main():
     if args.plot_only:
         with open(path) as f:
             return plot(json.load(f)['rows'], path[:-5] + '.png')
-    if not os.path.exists(args.gravomg_python):
-        print(f'no gravomg Python at {args.gravomg_python}: the original is '
-              f'left out (make gravomg-env)')
-        args.gravomg_python = None
+    args.gravomg_python = original_python(args)
     rows = []
     for name in args.only or SURFACES:
         system = build_system(name, args.meshes, args.cache)

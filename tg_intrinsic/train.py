@@ -303,13 +303,6 @@ class _NamedErrors:
         return repr(self.prepare)
 
 
-def _name_errors(prepare):
-    """Wraps ``prepare(data, split, index)`` so that a failure names the
-    shape (its file when the data set knows it); picklable when
-    ``prepare`` is."""
-    return _NamedErrors(prepare)
-
-
 class _PreparePoints:
     """DeltaNet's preparation of one shape (see :func:`build_point_sets`),
     a picklable callable for the worker processes."""
@@ -389,7 +382,7 @@ def build_point_sets(args):
                         [args.num_points, args.k, args.regularizer,
                          args.data_seed])
     train_items, test_items = _prepare_all(
-        sets, _name_errors(prepare), cache, args.quiet,
+        sets, _NamedErrors(prepare), cache, args.quiet,
         args.workers, args.on_disk)
     return train_items, test_items, sets[0]
 
@@ -406,7 +399,7 @@ def build_mesh_datasets(args):
                         [args.num_vertices, args.shapes_per_class,
                          repr(pipeline)])
     train_items, test_items = _prepare_all(
-        sets, _name_errors(_Pipeline(pipeline)), cache, args.quiet,
+        sets, _NamedErrors(_Pipeline(pipeline)), cache, args.quiet,
         args.workers, args.on_disk)
     return train_items, test_items, sets[0]
 

@@ -785,6 +785,36 @@ def hsn_accuracy(d, _):
              'hsn_accuracy.py', result)]
 
 
+@rows_for('normalisation')
+def normalisation(d, _):
+    def mean(runs, key):
+        return sum(r[key] for r in runs) / len(runs)
+
+    def of(model, norm):
+        return [r for r in d['runs']
+                if r['model'] == model and r['norm'] == norm]
+
+    hsn = {norm: of('hsn', norm) for norm in ('batch', 'instance', 'none')}
+    batch, deltanet = hsn['batch'], of('deltanet', 'batch')
+    result = (
+        f"same weights, test accuracy in eval mode vs with batch statistics "
+        f"(mean of {len(batch)} seeds). HSN, hsn-shrec11 protocol (batch "
+        f"1) on SyntheticSHREC: ComplexBatchNorm "
+        f"{pct(mean(batch, 'eval'), 1)} vs "
+        f"{pct(mean(batch, 'batch_statistics'), 1)} (recalibrated "
+        f"{pct(mean(batch, 'recalibrated'), 1)}); **per-shape "
+        f"ComplexInstanceNorm (default) "
+        f"{pct(mean(hsn['instance'], 'eval'), 1)} in both**; no "
+        f"normalisation {pct(mean(hsn['none'], 'eval'), 1)}. DeltaNet, "
+        f"deltanet-modelnet40 protocol (batch 32, 20 epochs) on "
+        f"SyntheticModelNet: running statistics "
+        f"{pct(mean(deltanet, 'eval'), 1)}, **recalibrated (default) "
+        f"{pct(mean(deltanet, 'recalibrated'), 1)}**, batch statistics "
+        f"{pct(mean(deltanet, 'batch_statistics'), 1)}")
+    return [('Evaluation that matches training: normalisation of HSN and '
+             'DeltaNet', 'normalisation.py', result)]
+
+
 SVBRDF_METHODS = [
     ('constant 0.5', 'a constant 0.5 everywhere'),
     ('spectrum', 'spectrum-only'),

@@ -71,6 +71,12 @@ def test_smoke_run(row, tmp_path, capsys):
         if protocol.train_per_class is not None:
             assert settings['train_per_class'] == 2
             assert run['train_shapes'] == 6     # 2 of 3 per class
+    # eval-mode and batch-statistics accuracy side by side; HSN's per-shape
+    # normalisation makes them one function
+    assert 0 <= summary['eval_accuracy'] <= 100
+    assert 0 <= summary['batch_statistics_accuracy'] <= 100
+    if protocol.model == 'hsn':
+        assert summary['largest_statistics_gap'] == 0
     out = capsys.readouterr().out
     paper = 'not verified' if protocol.reported is None \
         else f'{protocol.reported:.1f} %'
@@ -106,3 +112,15 @@ def test_bad_path(tmp_path, capsys):
     with pytest.raises(SystemExit) as info:
         module.main(['--out', str(tmp_path)])
     assert info.value.code == 2
+
+
+def test_a_gap_between_eval_mode_and_batch_statistics_is_a_warning():
+    common = load(ROWS[0])._common
+    summary = {'eval_accuracy': 47.5, 'batch_statistics_accuracy': 96.7,
+               'largest_statistics_gap': 49.2}
+    warning = common.statistics_warning(summary)
+    assert warning.startswith('warning: in eval mode the test accuracy')
+    assert '49.2 points (more than 2)' in warning and '47.5 vs 96.7' in warning
+    summary['largest_statistics_gap'] = 2.0
+    assert common.statistics_warning(summary) is None
+    assert common.statistics_warning({}) is None

@@ -25,6 +25,20 @@ and the random number generators' states; written atomically at every
 evaluation, so ``--resume`` continues an interrupted run), ``metrics.json``,
 ``metrics.csv`` (one row per epoch) and ``learning_curve.png``.
 
+Evaluation reports what inference on the checkpoint gives: the test
+scores are taken in eval mode (``model.eval()``) on the weights saved
+with them. HSN normalises per mesh (:class:`~tg_intrinsic.nn.
+ComplexInstanceNorm`, ``--hsn-norm instance``), the same function in
+training and evaluation at any batch size; batch norms (DeltaNet's, or
+HSN's with ``--hsn-norm batch``) get running statistics recomputed under
+the current weights before every evaluation
+(:func:`~tg_intrinsic.nn.recalibrate_batch_norm` over up to
+``RECALIBRATION_BATCHES`` training batches without augmentation). Every
+evaluation also records ``test_accuracy_batch_statistics``, the same
+weights normalised by each (shuffled) test batch's own statistics, and
+the log says so when the two differ by more than a point
+(``benchmarks/normalisation.py`` measures why both are needed).
+
 Runs are reproducible: ``--seed`` seeds the model's initialisation and,
 with the epoch, everything random in an epoch: the shuffling, each
 shape's augmentation (seeded by its index too) and dropout. So two runs
@@ -75,6 +89,9 @@ from tqdm import tqdm
 
 from tg_intrinsic import distributed
 from tg_intrinsic.io.figures import save_figure
+from tg_intrinsic.nn.recalibrate_batch_norm import (batch_norms,
+                                                    batch_statistics_copy,
+                                                    recalibrate_batch_norm)
 from tg_intrinsic.protocols import DEFAULT_PROTOCOL, PROTOCOLS, get_protocol
 from tg_intrinsic.utils import (atomic_torch_save, atomic_write,
                                 atomic_write_json, remove_temporaries)
@@ -444,7 +461,8 @@ def build_model(name: str, num_classes: int, args,
         cls = HSNClassification if args.task == 'classification' \
             else HSNSegmentation
         return cls(3, num_classes, channels=args.hsn_channels,
-                   max_order=args.max_order, rings=args.rings)
+                   max_order=args.max_order, rings=args.rings,
+                   norm=None if args.hsn_norm == 'none' else args.hsn_norm)
     raise ValueError(f"unknown model {name!r}; choose one of {MODELS}")
 
 
@@ -471,12 +489,20 @@ def instance_miou(pred: torch.Tensor, y: torch.Tensor,
 
 
 @torch.no_grad()
-def evaluate(model, loader, device, part_mask=None) -> Dict:
+def evaluate(model, loader, device, part_mask=None,
+             statistics: str = 'running') -> Dict:
     """Accuracy over shapes (classification) or points (segmentation); with
     a category-to-parts :obj:`part_mask` also the instance-averaged mIoU.
     In a data-parallel run every process scores its part of the test set
-    (its :obj:`loader`) and the counts are summed over the processes."""
-    model.eval()
+    (its :obj:`loader`) and the counts are summed over the processes.
+    :obj:`statistics` is ``'running'`` (``model.eval()``, what inference
+    gives) or ``'batch'`` (batch norms normalise with each test batch's own
+    statistics, on a copy of the model: see
+    :func:`batch_statistics_copy`)."""
+    if statistics == 'batch':
+        model = batch_statistics_copy(model)
+    else:
+        model.eval()
     correct = total = 0
     ious = []
     for batch in loader:
@@ -500,7 +526,20 @@ def evaluate(model, loader, device, part_mask=None) -> Dict:
 
 
 CSV_COLUMNS = ('epoch', 'train_loss', 'train_accuracy', 'test_accuracy',
-               'test_miou', 'seconds')
+               'test_accuracy_batch_statistics', 'test_miou', 'seconds')
+# Training batches whose statistics replace batch norms' running ones
+# before every evaluation (recalibrate_batch_norm).
+RECALIBRATION_BATCHES = 200
+
+
+def statistics_gap(record: Dict, points: float = 1.0) -> str:
+    """A note for the log when the test accuracy with batch statistics
+    differs from the eval-mode one by more than :obj:`points` points."""
+    other = record.get('test_accuracy_batch_statistics')
+    if other is None or abs(other - record['test_accuracy']) * 100 <= points:
+        return ''
+    return (f" (with batch statistics {other:.3f}: eval-mode inference "
+            f"differs by more than {points:g} point)")
 
 
 def write_metrics_csv(history: List[Dict], path: str):
@@ -648,6 +687,18 @@ def _train(args, device) -> Dict:
     test_loader = DataLoader(
         [test_items[i] for i in distributed.shard(
             range(len(test_items)), rank, world)], args.batch_size)
+    # batch statistics of shuffled test batches (the test set is often
+    # sorted by class); recalibration on the training items without
+    # augmentation, in training batches (the same count on every process)
+    shuffled = np.random.default_rng(distributed.derived_seed(
+        args.seed, 0, 1)).permutation(len(test_items))
+    shuffled_test_loader = DataLoader(
+        [test_items[i] for i in distributed.shard(shuffled, rank, world)],
+        args.batch_size)
+    recalibration = distributed.epoch_batches(
+        len(train_set), args.batch_size, args.seed, 0, rank,
+        world)[:RECALIBRATION_BATCHES]
+    has_batch_norm = bool(batch_norms(model))
     num_params = sum(p.numel() for p in model.parameters())
     say(f"{args.model} ({num_params / 1e6:.2f}M parameters), protocol "
         f"{args.protocol}, on {args.dataset}: {len(train_set)} train / "
@@ -697,12 +748,24 @@ def _train(args, device) -> Dict:
                   'test_accuracy': None,
                   'seconds': time.perf_counter() - started}
         if epoch % args.eval_every == 0 or epoch == args.epochs:
-            # per-process batch norm statistics: rank 0's, as saved
+            if has_batch_norm:
+                # the running statistics of the current weights, so that
+                # eval-mode inference scores what training does
+                recalibrate_batch_norm(model, DataLoader(
+                    train_set.items, batch_sampler=recalibration), device)
+            # equal on every process after the recalibration; rank 0's
+            # otherwise (per-process batch norm), as saved
             distributed.broadcast_buffers(model)
             scores = evaluate(model, test_loader, device, part_mask)
             record['test_accuracy'] = scores['accuracy']
             if 'miou' in scores:
                 record['test_miou'] = scores['miou']
+            # with batch statistics (per shape at batch size 1): the same
+            # by construction without batch norms
+            record['test_accuracy_batch_statistics'] = scores['accuracy'] \
+                if not has_batch_norm else evaluate(
+                    model, shuffled_test_loader, device, part_mask,
+                    statistics='batch')['accuracy']
         history.append(record)
         if not main_process:
             continue
@@ -710,7 +773,8 @@ def _train(args, device) -> Dict:
         if record['test_accuracy'] is not None:
             say(f"epoch {epoch}: loss {record['train_loss']:.3f}, "
                 f"train {record['train_accuracy']:.3f}, "
-                f"test {record['test_accuracy']:.3f}")
+                f"test {record['test_accuracy']:.3f}"
+                + statistics_gap(record))
             atomic_torch_save({'model': model.state_dict(),
                                'optimizer': optimizer.state_dict(),
                                'schedule': schedule.state_dict(),
@@ -722,6 +786,8 @@ def _train(args, device) -> Dict:
                          f'{args.model} on {args.dataset}')
     final = history[-1]['test_accuracy'] if history else None
     metrics = {'model': args.model, 'dataset': args.dataset,
+               'final_test_accuracy_batch_statistics': history[-1].get(
+                   'test_accuracy_batch_statistics') if history else None,
                'final_test_miou': history[-1].get('test_miou') if history
                else None,
                'protocol': args.protocol, 'parameters': num_params,
@@ -840,6 +906,12 @@ def add_arguments(parser, model_and_dataset: bool = True):
     add('--max-order', type=int, default=None,
         help='protocol; hsn: highest rotation order (0: one stream)')
     add('--rings', type=int, default=None, help='protocol')
+    add('--hsn-norm', default='instance', choices=['instance', 'batch',
+                                                   'none'],
+        help='hsn: normalisation in the blocks; instance (statistics per '
+        'mesh, the same in training and evaluation), batch (running '
+        'statistics in evaluation; with one mesh per batch they fit no '
+        'mesh) or none (default: instance)')
     add('--radius', type=float, default=None,
         help='protocol; hsn: disc radius on unit-area meshes')
     add('--resample-vertices', type=int, default=None,

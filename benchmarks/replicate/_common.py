@@ -55,6 +55,9 @@ SMOKE_FLAGS = {
             '--radius', '0.3'],
 }
 SMOKE_EPOCHS = 1
+# Largest difference (points) between eval-mode and batch-statistics test
+# accuracy before a replication warns.
+GAP_POINTS = 2.0
 SMOKE_REPEATS = 2
 SMOKE_TRAIN_PER_CLASS = 2       # of the 3 training shapes per class
 SMOKE_RESAMPLE_VERTICES = 60    # of the ~150 vertices per mesh
@@ -184,7 +187,19 @@ def summarize(protocol, runs: List[Dict], seconds: float,
     the repeats, with the sizes of the runs."""
     _, final = metric_keys(protocol)
     values = [100.0 * run[final] for run in runs]
+    # eval-mode accuracy (what inference on the checkpoint gives) against
+    # the same weights with batch statistics (per shape at batch size 1)
+    pairs = [(100.0 * run['final_test_accuracy'],
+              100.0 * run['final_test_accuracy_batch_statistics'])
+             for run in runs
+             if run.get('final_test_accuracy_batch_statistics') is not None]
     return {
+        'eval_accuracy': float(np.mean([a for a, _ in pairs]))
+        if pairs else None,
+        'batch_statistics_accuracy': float(np.mean([b for _, b in pairs]))
+        if pairs else None,
+        'largest_statistics_gap': max((abs(a - b) for a, b in pairs),
+                                      default=None),
         'row': protocol.name, 'metric': protocol.metric,
         'reported': protocol.reported,
         'mean': float(np.mean(values)) if values else None,
@@ -196,6 +211,20 @@ def summarize(protocol, runs: List[Dict], seconds: float,
         'test_shapes': sorted({run['test_shapes'] for run in runs}),
         'minutes': seconds / 60, 'smoke': smoke,
     }
+
+
+def statistics_warning(summary: Dict, points: float = GAP_POINTS
+                       ) -> Optional[str]:
+    """A warning when eval-mode test accuracy and the batch-statistics
+    one differ by more than :obj:`points` points in any repeat: then
+    ``model.eval()`` inference does not give what the weights learned."""
+    gap = summary.get('largest_statistics_gap')
+    if gap is None or gap <= points:
+        return None
+    return (f"warning: in eval mode the test accuracy differs from the "
+            f"same weights' with batch statistics by {gap:.1f} points "
+            f"(more than {points:g}): mean {summary['eval_accuracy']:.1f} "
+            f"vs {summary['batch_statistics_accuracy']:.1f} %")
 
 
 def _span(values: Sequence[int]) -> str:
@@ -215,6 +244,10 @@ def format_table(summary: Dict) -> str:
                              f"{_span(summary['test_shapes'])}",
         'minutes': f"{summary['minutes']:.1f}",
     }
+    if summary.get('eval_accuracy') is not None:
+        cells['accuracy eval/batch stats'] = (
+            f"{summary['eval_accuracy']:.1f}/"
+            f"{summary['batch_statistics_accuracy']:.1f} %")
     widths = {k: max(len(k), len(v)) for k, v in cells.items()}
     return '\n'.join('  '.join(text.ljust(widths[k]) for k, text in
                                zip(cells, line)).rstrip()
@@ -364,6 +397,9 @@ def run(row: Row, argv: Optional[Sequence[str]] = None,
     plot(osp.join(out, f'{row.name}.png'), protocol, runs, summary)
     print()
     print(format_table(summary))
+    warning = statistics_warning(summary)
+    if warning:
+        print(warning)
     print(f"written: {json_path}, {osp.join(out, row.name + '.png')}")
     return result
 

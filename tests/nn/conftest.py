@@ -128,3 +128,33 @@ def permute_points(data, order):
     out.pool_transport_1 = data.pool_transport_1[order]
     out.sample_index_1 = inverse[data.sample_index_1]
     return out
+
+
+def assert_eval_matches_batch_statistics(model, data, tolerance=1e-2):
+    """After ``recalibrate_batch_norm(model, [data])``, eval mode on
+    ``data`` gives the batch-statistics output but for the variance's
+    n / (n - 1) in every batch norm (running variances are unbiased,
+    batch statistics not): with that factor undone, the two agree to
+    ``tolerance`` of the largest entry; without the recalibration they do
+    not."""
+    from tg_intrinsic.nn import recalibrate_batch_norm
+    from tg_intrinsic.nn.recalibrate_batch_norm import (
+        batch_norms, batch_statistics_copy)
+    from tests.conftest import rel
+    before = model.eval()(data)
+    recalibrate_batch_norm(model, [data])
+    clone = batch_statistics_copy(model)
+    counts = {}
+    hooks = [m.register_forward_hook(
+        lambda m, inputs, _: counts.__setitem__(m, inputs[0].size(0)))
+        for m in batch_norms(clone)]
+    expected = clone(data)
+    for hook in hooks:
+        hook.remove()
+    names = {m: name for name, m in clone.named_modules()}
+    own = dict(model.named_modules())
+    with torch.no_grad():
+        for module, n in counts.items():
+            own[names[module]].running_var.mul_((n - 1) / n)
+    assert rel(before, expected) > 0.1
+    assert rel(model(data), expected) < tolerance

@@ -8,15 +8,19 @@ from .delta_conv import DeltaConv
 from .complex_relu import ComplexReLU
 from .complex_linear import ComplexLinear
 from .complex_batch_norm import ComplexBatchNorm
+from .complex_instance_norm import ComplexInstanceNorm
 from .harmonic_conv import HarmonicConv
 from .harmonic_resnet_block import HarmonicResNetBlock
 from .frequency_svbrdf import FrequencySVBRDF
 from .svbrdf_result import SVBRDFResult
 from .sync_complex_batch_norm import SyncComplexBatchNorm
 from .sync_batch_norm import SyncBatchNorm, convert_sync_batch_norm
+from .recalibrate_batch_norm import recalibrate_batch_norm
 from . import models
 
 __all__ = ['VectorLinear', 'VectorNonLin', 'VectorMLP', 'DeltaConv',
-           'ComplexReLU', 'ComplexLinear', 'ComplexBatchNorm', 'HarmonicConv',
+           'ComplexReLU', 'ComplexLinear', 'ComplexBatchNorm',
+           'ComplexInstanceNorm', 'HarmonicConv',
            'HarmonicResNetBlock', 'FrequencySVBRDF', 'SVBRDFResult', 'models',
-           'SyncBatchNorm', 'SyncComplexBatchNorm', 'convert_sync_batch_norm']
+           'SyncBatchNorm', 'SyncComplexBatchNorm', 'convert_sync_batch_norm',
+           'recalibrate_batch_norm']

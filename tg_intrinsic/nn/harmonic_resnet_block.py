@@ -1,13 +1,51 @@
+from typing import Optional
+
 import torch
 from torch import Tensor
 
-from tg_intrinsic.geometry.checks import check_positive_int, check_rows
+from tg_intrinsic.geometry.checks import (check_choice, check_positive_int,
+                                          check_rows)
 from tg_intrinsic.geometry.geodesics.harmonic import (HarmonicOperator,
                                              harmonic_layout)
 from tg_intrinsic.nn.complex_batch_norm import ComplexBatchNorm
+from tg_intrinsic.nn.complex_instance_norm import ComplexInstanceNorm
 from tg_intrinsic.nn.complex_linear import ComplexLinear
 from tg_intrinsic.nn.complex_relu import ComplexReLU
 from tg_intrinsic.nn.harmonic_conv import HarmonicConv
+
+
+# The normalisations of HSN's blocks; 'instance' (per shape) is the default:
+# with one mesh per batch, as the papers' protocols train, batch norm's
+# running statistics fit no single mesh (benchmarks/normalisation.py).
+COMPLEX_NORMS = ('instance', 'batch', None)
+DEFAULT_COMPLEX_NORM = 'instance'
+
+
+def complex_norm(norm: Optional[str], channels: int, streams: int
+                 ) -> torch.nn.Module:
+    """The normalisation :obj:`norm` of :data:`COMPLEX_NORMS`:
+    :class:`ComplexInstanceNorm`, :class:`ComplexBatchNorm` or none."""
+    check_choice(norm, 'norm', COMPLEX_NORMS)
+    if norm == 'instance':
+        return ComplexInstanceNorm(channels, streams)
+    if norm == 'batch':
+        return ComplexBatchNorm(channels, streams)
+    return torch.nn.Identity()
+
+
+def norm_repr(norm: Optional[str]) -> str:
+    """The ``norm`` argument for a repr, where it is not the default."""
+    return '' if norm == DEFAULT_COMPLEX_NORM else f', norm={norm!r}'
+
+
+def apply_complex_norm(norm: torch.nn.Module, z: Tensor,
+                       batch: Optional[Tensor] = None,
+                       num_shapes: Optional[int] = None) -> Tensor:
+    """``norm(z)``, with the shape of every point where :obj:`norm`
+    normalises per shape."""
+    if isinstance(norm, ComplexInstanceNorm):
+        return norm(z, batch, num_shapes)
+    return norm(z)
 
 
 class HarmonicResNetBlock(torch.nn.Module):
@@ -29,8 +67,11 @@ class HarmonicResNetBlock(torch.nn.Module):
             (default: :obj:`6`)
         prev_order (int, optional): Highest input order.
             (default: :obj:`1`)
-        batch_norm (bool, optional): Use :class:`ComplexBatchNorm` after each
-            convolution. (default: :obj:`True`)
+        norm (str, optional): The normalisation after each convolution:
+            :obj:`'instance'` (:class:`ComplexInstanceNorm`, statistics per
+            shape: training and evaluation agree at any batch size),
+            :obj:`'batch'` (:class:`ComplexBatchNorm`) or :obj:`None`.
+            (default: :obj:`'instance'`)
         separate_streams (bool, optional): See :class:`HarmonicConv`.
             (default: :obj:`True`)
 
@@ -43,7 +84,8 @@ class HarmonicResNetBlock(torch.nn.Module):
     """
     def __init__(self, in_channels: int, out_channels: int,
                  max_order: int = 1, rings: int = 6, prev_order: int = 1,
-                 batch_norm: bool = True, separate_streams: bool = True):
+                 norm: Optional[str] = DEFAULT_COMPLEX_NORM,
+                 separate_streams: bool = True):
         super().__init__()
         for name, value, low in (('in_channels', in_channels, 1),
                                  ('out_channels', out_channels, 1),
@@ -63,10 +105,9 @@ class HarmonicResNetBlock(torch.nn.Module):
         self.act1 = ComplexReLU(out_channels)
         self.act2 = ComplexReLU(out_channels)
         streams = max_order + 1
-        self.norm1 = ComplexBatchNorm(out_channels, streams) \
-            if batch_norm else torch.nn.Identity()
-        self.norm2 = ComplexBatchNorm(out_channels, streams) \
-            if batch_norm else torch.nn.Identity()
+        self.norm = norm
+        self.norm1 = complex_norm(norm, out_channels, streams)
+        self.norm2 = complex_norm(norm, out_channels, streams)
         self.skip = ComplexLinear(in_channels, out_channels, bias=False) \
             if in_channels != out_channels else torch.nn.Identity()
 
@@ -75,10 +116,14 @@ class HarmonicResNetBlock(torch.nn.Module):
             if module is not self and hasattr(module, 'reset_parameters'):
                 module.reset_parameters()
 
-    def forward(self, z: Tensor, operators: dict) -> Tensor:
+    def forward(self, z: Tensor, operators: dict,
+                batch: Optional[Tensor] = None,
+                num_shapes: Optional[int] = None) -> Tensor:
         """``operators`` maps ``(in_orders, out_orders)`` to the
         :class:`HarmonicOperator` of this level (see
-        :func:`harmonic_operators`)."""
+        :func:`harmonic_operators`); ``batch`` is the shape index of every
+        point (PyG's ``batch`` on this level; :obj:`None`: one shape), which
+        the instance normalisation needs."""
         p, o = self.prev_order + 1, self.max_order + 1
         missing = [pair for pair in ((p, o), (o, o))
                    if not isinstance(operators, dict) or pair not in operators]
@@ -89,8 +134,10 @@ class HarmonicResNetBlock(torch.nn.Module):
                              f"harmonic_operators(..., pairs={missing})")
         # Checked here so that the error names this block's input.
         check_rows(z, 'z', operators[(p, o)].num_nodes, "'operators'")
-        h = self.act1(self.norm1(self.conv1(z, operator=operators[(p, o)])))
-        h = self.norm2(self.conv2(h, operator=operators[(o, o)]))
+        h = apply_complex_norm(self.norm1, self.conv1(
+            z, operator=operators[(p, o)]), batch, num_shapes)
+        h = apply_complex_norm(self.norm2, self.conv2(
+            self.act1(h), operator=operators[(o, o)]), batch, num_shapes)
         skip = z
         if p != o:  # streams the input lacks are 0; extra ones are dropped
             skip = torch.cat([z, z.new_zeros(z.size(0), max(0, o - p),
@@ -100,7 +147,8 @@ class HarmonicResNetBlock(torch.nn.Module):
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}({self.in_channels}, '
                 f'{self.out_channels}, max_order={self.max_order}, '
-                f'prev_order={self.prev_order})')
+                f'prev_order={self.prev_order}' + norm_repr(self.norm)
+                + ')')
 
 
 def harmonic_operators(edge_index: Tensor, harmonic: Tensor,
@@ -114,4 +162,5 @@ def harmonic_operators(edge_index: Tensor, harmonic: Tensor,
             for pair in set(pairs)}
 
 
-__all__ = ['HarmonicResNetBlock', 'harmonic_operators']
+__all__ = ['HarmonicResNetBlock', 'harmonic_operators', 'complex_norm',
+           'apply_complex_norm', 'COMPLEX_NORMS']

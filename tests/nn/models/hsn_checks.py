@@ -82,3 +82,37 @@ def check_missing_level_is_explained(model_class, key, match):
     del data[key]
     with pytest.raises(ValueError, match=match):
         model(data)
+
+
+def check_training_equals_evaluation(make_model, data_list):
+    """With the default normalisation (per shape), a model computes the
+    same function in training and evaluation mode, and a shape's outputs
+    do not depend on the other shapes of its batch; with batch norm they
+    do (so the check can fail). ``make_model(norm)`` builds the model,
+    ``norm=None`` leaving the default."""
+    batch = Batch.from_data_list(data_list)
+    torch.manual_seed(0)
+    model = make_model(None).double()
+    for module in model.modules():   # no dropout: compare the normalisation
+        if isinstance(module, torch.nn.Dropout):
+            module.p = 0.0
+    if hasattr(model, 'dropout'):
+        model.dropout = 0.0
+    with torch.no_grad():
+        for p in model.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    trained = model.train()(batch)
+    alone = torch.cat([model(d) for d in data_list])
+    evaluated = model.eval()(batch)
+    assert rel(evaluated, trained) < 1e-12
+    assert rel(alone, trained) < 1e-10
+    torch.manual_seed(0)
+    batch_norm = make_model('batch').double().train()
+    assert rel(torch.cat([batch_norm(d) for d in data_list]),
+               batch_norm(batch)) > 1e-3
+
+
+def check_norm_is_validated(make_model):
+    with pytest.raises(ValueError, match=r"'norm' must be one of "
+                       r"\('instance', 'batch', None\), got 'layer'"):
+        make_model('layer')

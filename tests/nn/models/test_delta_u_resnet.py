@@ -9,6 +9,7 @@ from tg_intrinsic.nn.models import DeltaUResNet
 from tg_intrinsic.pool import GravoPool
 from tg_intrinsic.transforms import PoolingLevels
 from tests.conftest import fibonacci_sphere
+from tests.nn.conftest import assert_eval_matches_batch_statistics
 from tests.symmetry import random_rotation
 
 
@@ -131,3 +132,11 @@ def test_it_learns_a_tiny_segmentation():
     with torch.no_grad():  # batch statistics, as in training
         accuracy = (model(data).argmax(1) == data.y).float().mean()
     assert accuracy > 0.85
+
+
+
+def test_eval_after_recalibrating_on_a_batch_gives_its_batch_output():
+    # every batch norm of the U-ResNet: point MLPs on four levels, the
+    # neighbour maxima's closed-form statistics, the decoder and head
+    assert_eval_matches_batch_statistics(
+        _model(), Batch.from_data_list([_prepared(seed=s) for s in (0, 1)]))

@@ -4,6 +4,8 @@ import torch
 from tg_intrinsic.nn.models import HSNCorrespondence
 from tests.conftest import rel
 from tests.nn.conftest import RINGS, two_level_data
+from tests.nn.models.hsn_checks import (check_norm_is_validated,
+                                        check_training_equals_evaluation)
 
 
 def test_logits_over_the_template_and_gauge_invariance():
@@ -69,3 +71,18 @@ def test_repr():
     assert repr(model) == ('HSNCorrespondence(3, 40, channels=(4, 6), '
                            'max_order=1, rings=4, hidden=256, '
                            'dropout=0.5)')
+
+
+def make(norm):
+    norm = {} if norm is None else {'norm': norm}
+    return HSNCorrespondence(3, 7, channels=(4, 6), rings=RINGS, hidden=8,
+                             **norm)
+
+
+def test_training_and_evaluation_compute_the_same_function():
+    check_training_equals_evaluation(
+        make, [two_level_data(s, max_order=1) for s in (1, 2, 3)])
+
+
+def test_norm_is_validated():
+    check_norm_is_validated(make)

@@ -6,7 +6,9 @@ from tests.nn.models.hsn_checks import (MISSING_LEVELS,
                                         check_batched_equals_per_example,
                                         check_constructors_need_positive_sizes,
                                         check_gauge_invariance,
-                                        check_missing_level_is_explained)
+                                        check_missing_level_is_explained,
+                                        check_norm_is_validated,
+                                        check_training_equals_evaluation)
 from tests.conftest import rel
 from tests.nn.conftest import RINGS, permute_points, two_level_data
 
@@ -52,3 +54,17 @@ def test_repr():
 @pytest.mark.parametrize('key,match', MISSING_LEVELS)
 def test_missing_levels_are_explained(key, match):
     check_missing_level_is_explained(HSNSegmentation, key, match)
+
+
+def make(norm):
+    norm = {} if norm is None else {'norm': norm}
+    return HSNSegmentation(3, 5, channels=(4, 6), rings=RINGS, **norm)
+
+
+def test_training_and_evaluation_compute_the_same_function():
+    check_training_equals_evaluation(
+        make, [two_level_data(s, max_order=1) for s in (1, 2, 3)])
+
+
+def test_norm_is_validated():
+    check_norm_is_validated(make)

@@ -12,6 +12,8 @@ from tg_intrinsic.transforms import (HarmonicPrecompute, LogMap,
                                      MultiscaleSupports)
 from tests.conftest import grid_mesh, rel
 from tests.nn.conftest import RINGS, disc_graph, two_level_data
+from tests.nn.models.hsn_checks import (check_norm_is_validated,
+                                        check_training_equals_evaluation)
 from tests.symmetry import gauge_change, rotate_frames
 
 
@@ -238,3 +240,17 @@ def test_repr():
     model = HSNUResNet(3, 5, channels=(4, 6, 8), max_order=2, rings=RINGS)
     assert repr(model) == ('HSNUResNet(3, 5, channels=(4, 6, 8), '
                            'max_order=2, rings=4, blocks=2)')
+
+
+def make(norm):
+    norm = {} if norm is None else {'norm': norm}
+    return HSNUResNet(3, 5, channels=(4, 6, 8), rings=RINGS, **norm)
+
+
+def test_training_and_evaluation_compute_the_same_function():
+    check_training_equals_evaluation(
+        make, [three_level_data(s) for s in (1, 2, 3)])
+
+
+def test_norm_is_validated():
+    check_norm_is_validated(make)

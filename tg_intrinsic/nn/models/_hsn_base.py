@@ -1,11 +1,15 @@
-from typing import Dict, Iterable, Sequence, Tuple
+from typing import Dict, Iterable, Optional, Sequence, Tuple
 
 import torch
 from torch import Tensor
 from torch_geometric.data import Data
 
-from tg_intrinsic.geometry.checks import check_channels, check_positive_int
-from tg_intrinsic.nn.harmonic_resnet_block import harmonic_operators
+from tg_intrinsic.geometry.checks import (check_channels, check_choice,
+                                          check_positive_int)
+from tg_intrinsic.nn.harmonic_resnet_block import (COMPLEX_NORMS,
+                                                   DEFAULT_COMPLEX_NORM,
+                                                   harmonic_operators,
+                                                   norm_repr)
 
 
 class HSNBase(torch.nn.Module):
@@ -13,7 +17,8 @@ class HSNBase(torch.nn.Module):
     linear layer to the first width, the output bias and the repr; a model
     adds its blocks and :meth:`reset_parameters` of them."""
     def __init__(self, in_channels: int, num_classes: int,
-                 channels: Sequence[int], max_order: int, rings: int):
+                 channels: Sequence[int], max_order: int, rings: int,
+                 norm: Optional[str] = DEFAULT_COMPLEX_NORM):
         super().__init__()
         self.in_channels = check_positive_int(in_channels, 'in_channels')
         self.num_classes = check_positive_int(num_classes, 'num_classes')
@@ -21,6 +26,7 @@ class HSNBase(torch.nn.Module):
                                              length=2))
         self.max_order = max_order
         self.rings = rings
+        self.norm = check_choice(norm, 'norm', COMPLEX_NORMS)
         self.lin = torch.nn.Linear(in_channels, self.channels[0])
         self.bias = torch.nn.Parameter(torch.zeros(num_classes))
 
@@ -31,7 +37,9 @@ class HSNBase(torch.nn.Module):
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}({self.in_channels}, '
                 f'{self.num_classes}, channels={self.channels}, '
-                f'max_order={self.max_order}, rings={self.rings})')
+                f'max_order={self.max_order}, rings={self.rings}'
+                + norm_repr(self.norm) + ')')
+
 
 
 def level_key(name: str, level: int) -> str:
@@ -53,6 +61,19 @@ def level_operators(data: Data, level: int, num_nodes: int,
         data[level_key('edge_index', level)],
         data[level_key('harmonic', level)],
         data[level_key('transport', level)], num_nodes, pairs)
+
+
+def level_batch(data: Data, level: int, size: int, like: Tensor
+                ) -> Tuple[Tensor, int]:
+    """The shape index of every point of level ``level`` (``size`` points)
+    and the number of shapes: from a batch, or zeros and 1 for a single
+    shape."""
+    shapes = getattr(data, 'num_graphs', None) or 1
+    if hasattr(data, 'level_batch'):
+        return data.level_batch(level), shapes
+    if level == 0 and getattr(data, 'batch', None) is not None:
+        return data.batch, shapes
+    return torch.zeros(size, dtype=torch.long, device=like.device), shapes
 
 
 def pooling(data: Data, level: int) -> Tuple[Tensor, Tensor, int]:

@@ -1,6 +1,5 @@
-from typing import Sequence
+from typing import Optional, Sequence
 
-import torch
 import torch.nn.functional as F
 from torch import Tensor
 from torch_geometric.data import Data
@@ -9,8 +8,8 @@ from torch_geometric.nn import global_mean_pool
 from tg_intrinsic.nn.harmonic_conv import HarmonicConv
 from tg_intrinsic.nn.harmonic_resnet_block import HarmonicResNetBlock
 from tg_intrinsic.nn.models._hsn_base import (HSNBase, input_features,
-                                              invariant, level_operators,
-                                              lift, pooling)
+                                              invariant, level_batch,
+                                              level_operators, lift, pooling)
 from tg_intrinsic.pool import ParallelTransportPool
 
 
@@ -46,6 +45,10 @@ class HSNClassification(HSNBase):
             the one-stream ablation. (default: :obj:`1`)
         rings (int, optional): Rings of the radial profiles (as
             precomputed). (default: :obj:`6`)
+        norm (str, optional): The blocks' normalisation, see
+            :class:`HarmonicResNetBlock`: :obj:`'instance'` (per shape, so
+            that :meth:`eval` scores what training scores), :obj:`'batch'`
+            or :obj:`None`. (default: :obj:`'instance'`)
 
     Shapes:
         - **input:** a (batched) :class:`~tg_intrinsic.data.IntrinsicData`
@@ -53,14 +56,15 @@ class HSNClassification(HSNBase):
     """
     def __init__(self, in_channels: int, num_classes: int,
                  channels: Sequence[int] = (16, 32), max_order: int = 1,
-                 rings: int = 6):
-        super().__init__(in_channels, num_classes, channels, max_order, rings)
+                 rings: int = 6, norm: Optional[str] = 'instance'):
+        super().__init__(in_channels, num_classes, channels, max_order, rings,
+                         norm)
         c0, c1 = self.channels
         self.block0 = HarmonicResNetBlock(c0, c0, max_order, rings,
-                                          prev_order=0)
+                                          prev_order=0, norm=norm)
         self.pool = ParallelTransportPool()
         self.block1 = HarmonicResNetBlock(c0, c1, max_order, rings,
-                                          prev_order=max_order)
+                                          prev_order=max_order, norm=norm)
         self.conv = HarmonicConv(c1, num_classes, max_order, rings,
                                  prev_order=max_order, offset=False)
 
@@ -73,12 +77,12 @@ class HSNClassification(HSNBase):
         x = input_features(data, self.in_channels)
         o = self.max_order + 1
         ops0 = level_operators(data, 0, x.size(0), [(1, o), (o, o)])
-        z = self.block0(lift(F.relu(self.lin(x))), ops0)
+        batch0, shapes = level_batch(data, 0, x.size(0), x)
+        z = self.block0(lift(F.relu(self.lin(x))), ops0, batch0, shapes)
         cluster, angle, n1 = pooling(data, 1)
         z = self.pool(z, cluster, angle, n1)
         ops1 = level_operators(data, 1, n1, [(o, o)])
-        z = self.block1(z, ops1)
+        batch1, _ = level_batch(data, 1, n1, x)
+        z = self.block1(z, ops1, batch1, shapes)
         z = self.conv(z, operator=ops1[(o, o)])
-        batch = data.level_batch(1) if hasattr(data, 'level_batch') else \
-            torch.zeros(n1, dtype=torch.long, device=z.device)
-        return global_mean_pool(invariant(z), batch) + self.bias
+        return global_mean_pool(invariant(z), batch1, shapes) + self.bias

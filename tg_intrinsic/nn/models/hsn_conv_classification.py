@@ -6,11 +6,13 @@ from torch_geometric.data import Data
 from torch_geometric.nn import global_mean_pool
 
 from tg_intrinsic.geometry.checks import check_channels, check_positive_int
-from tg_intrinsic.nn.complex_batch_norm import ComplexBatchNorm
 from tg_intrinsic.nn.complex_relu import ComplexReLU
 from tg_intrinsic.nn.harmonic_conv import HarmonicConv
+from tg_intrinsic.nn.harmonic_resnet_block import (apply_complex_norm,
+                                                   complex_norm, norm_repr)
 from tg_intrinsic.nn.models._hsn_base import (input_features, invariant,
-                                              level_operators, pooling)
+                                              level_batch, level_operators,
+                                              pooling)
 from tg_intrinsic.pool import ParallelTransportPool
 
 
@@ -22,7 +24,8 @@ class HSNConvClassification(torch.nn.Module):
     Conv8, Conv8, Pool, Conv16, Conv16, Pool, Conv32, Conv32, Conv10, with
     the default :obj:`channels`. Level :math:`l` runs :obj:`convs_per_level`
     :class:`HarmonicConv` layers of ``channels[l]`` features, each followed
-    by :class:`ComplexBatchNorm` and :class:`ComplexReLU`, then
+    by a normalisation (:class:`ComplexInstanceNorm` by default) and
+    :class:`ComplexReLU`, then
     parallel-transport pooling to level :math:`l + 1`; a last
     :class:`HarmonicConv` to :math:`C` channels on the coarsest level, the
     magnitudes of its streams (gauge invariant) and a global mean give the
@@ -32,7 +35,7 @@ class HSNConvClassification(torch.nn.Module):
         \hat{y} = \frac{1}{n_L} \sum_{i} \sum_{M} \big|
         \mathrm{conv}(\mathbf{z}^{(L)})_i^M \big| + \mathbf{b},
         \qquad \mathbf{z}^{(l + 1)} = \mathrm{pool}\big(
-        \sigma(\mathrm{BN}(\mathrm{conv}(\cdots\sigma(\mathrm{BN}(
+        \sigma(\mathrm{N}(\mathrm{conv}(\cdots\sigma(\mathrm{N}(
         \mathrm{conv}(\mathbf{z}^{(l)}))))))\big).
 
     With :obj:`max_order=0` (one stream) every filter is isotropic, so the
@@ -60,6 +63,10 @@ class HSNConvClassification(torch.nn.Module):
             the one-stream ablation. (default: :obj:`1`)
         rings (int, optional): Rings of the radial profiles (as
             precomputed). (default: :obj:`6`)
+        norm (str, optional): The normalisation after each convolution,
+            see :class:`HarmonicResNetBlock`: :obj:`'instance'` (per
+            example), :obj:`'batch'` or :obj:`None`.
+            (default: :obj:`'instance'`)
 
     Shapes:
         - **input:** a (batched) :class:`~tg_intrinsic.data.IntrinsicData`
@@ -68,7 +75,7 @@ class HSNConvClassification(torch.nn.Module):
     def __init__(self, in_channels: int, num_classes: int,
                  channels: Sequence[int] = (8, 16, 32),
                  convs_per_level: int = 2, max_order: int = 1,
-                 rings: int = 6):
+                 rings: int = 6, norm: Optional[str] = 'instance'):
         super().__init__()
         self.in_channels = check_positive_int(in_channels, 'in_channels')
         self.num_classes = check_positive_int(num_classes, 'num_classes')
@@ -77,6 +84,7 @@ class HSNConvClassification(torch.nn.Module):
                                                   'convs_per_level')
         self.max_order = check_positive_int(max_order, 'max_order', 0)
         self.rings = check_positive_int(rings, 'rings')
+        self.norm = norm
         self.convs = torch.nn.ModuleList()
         self.norms = torch.nn.ModuleList()
         self.acts = torch.nn.ModuleList()
@@ -85,7 +93,7 @@ class HSNConvClassification(torch.nn.Module):
             for _ in range(self.convs_per_level):
                 self.convs.append(HarmonicConv(width, c, max_order, rings,
                                                prev_order=order))
-                self.norms.append(ComplexBatchNorm(c, max_order + 1))
+                self.norms.append(complex_norm(norm, c, max_order + 1))
                 self.acts.append(ComplexReLU(c))
                 width, order = c, max_order
         self.pool = ParallelTransportPool()
@@ -95,7 +103,8 @@ class HSNConvClassification(torch.nn.Module):
 
     def reset_parameters(self):
         for module in (*self.convs, *self.norms, *self.acts, self.out):
-            module.reset_parameters()
+            if hasattr(module, 'reset_parameters'):
+                module.reset_parameters()
         torch.nn.init.zeros_(self.bias)
 
     def operators(self, data: Data) -> List[dict]:
@@ -131,21 +140,21 @@ class HSNConvClassification(torch.nn.Module):
             if level > 0:
                 cluster, angle, size = pooling(data, level)
                 z = self.pool(z, cluster, angle, size)
+            batch, shapes = level_batch(data, level, size, z)
             first = 1 if level == 0 else o
             ops = operators[level]
             for k in range(self.convs_per_level):
                 pair = (first, o) if k == 0 else (o, o)
                 z = self.convs[layer](z, operator=ops[pair])
-                z = self.acts[layer](self.norms[layer](z))
+                z = self.acts[layer](apply_complex_norm(
+                    self.norms[layer], z, batch, shapes))
                 layer += 1
         z = self.out(z, operator=ops[(o, o)])
-        last = len(self.channels) - 1
-        batch = data.level_batch(last) if hasattr(data, 'level_batch') \
-            else torch.zeros(size, dtype=torch.long, device=z.device)
-        return global_mean_pool(invariant(z), batch) + self.bias
+        return global_mean_pool(invariant(z), batch, shapes) + self.bias
 
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}({self.in_channels}, '
                 f'{self.num_classes}, channels={self.channels}, '
                 f'convs_per_level={self.convs_per_level}, '
-                f'max_order={self.max_order}, rings={self.rings})')
+                f'max_order={self.max_order}, rings={self.rings}'
+                + norm_repr(self.norm) + ')')

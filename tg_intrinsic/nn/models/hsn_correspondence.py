@@ -1,4 +1,4 @@
-from typing import Sequence
+from typing import Optional, Sequence
 
 import torch
 import torch.nn.functional as F
@@ -6,6 +6,7 @@ from torch import Tensor
 from torch_geometric.data import Data
 
 from tg_intrinsic.geometry.checks import check_positive_int
+from tg_intrinsic.nn.harmonic_resnet_block import norm_repr
 from tg_intrinsic.nn.models.hsn_u_resnet import HSNUResNet
 
 
@@ -40,6 +41,8 @@ class HSNCorrespondence(torch.nn.Module):
             (default: :obj:`256`, as in the paper)
         dropout (float, optional): Dropout before the last layer.
             (default: :obj:`0.5`)
+        norm (str, optional): The U-ResNet's normalisation, see
+            :class:`HarmonicResNetBlock`. (default: :obj:`'instance'`)
 
     Shapes:
         - **input:** a (batched) :class:`~tg_intrinsic.data.IntrinsicData`
@@ -47,7 +50,8 @@ class HSNCorrespondence(torch.nn.Module):
     """
     def __init__(self, in_channels: int, num_template_vertices: int,
                  channels: Sequence[int] = (16, 32), max_order: int = 1,
-                 rings: int = 6, hidden: int = 256, dropout: float = 0.5):
+                 rings: int = 6, hidden: int = 256, dropout: float = 0.5,
+                 norm: Optional[str] = 'instance'):
         super().__init__()
         self.num_template_vertices = check_positive_int(
             num_template_vertices, 'num_template_vertices')
@@ -56,7 +60,7 @@ class HSNCorrespondence(torch.nn.Module):
             raise ValueError(f"'dropout' must be in [0, 1), got {dropout!r}")
         self.dropout = float(dropout)
         self.backbone = HSNUResNet(in_channels, None, channels, max_order,
-                                   rings)
+                                   rings, norm=norm)
         self.lin1 = torch.nn.Linear(self.backbone.channels[0], hidden)
         self.lin2 = torch.nn.Linear(hidden, self.num_template_vertices)
 
@@ -75,4 +79,5 @@ class HSNCorrespondence(torch.nn.Module):
         return (f'{self.__class__.__name__}({b.in_channels}, '
                 f'{self.num_template_vertices}, channels={b.channels}, '
                 f'max_order={b.max_order}, rings={b.rings}, '
-                f'hidden={self.hidden}, dropout={self.dropout})')
+                f'hidden={self.hidden}, dropout={self.dropout}'
+                + norm_repr(b.norm) + ')')

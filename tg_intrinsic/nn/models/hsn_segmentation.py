@@ -1,4 +1,4 @@
-from typing import Sequence
+from typing import Optional, Sequence
 
 import torch
 import torch.nn.functional as F
@@ -8,8 +8,8 @@ from torch_geometric.data import Data
 from tg_intrinsic.nn.harmonic_conv import HarmonicConv
 from tg_intrinsic.nn.harmonic_resnet_block import HarmonicResNetBlock
 from tg_intrinsic.nn.models._hsn_base import (HSNBase, input_features,
-                                              invariant, level_operators,
-                                              lift, pooling)
+                                              invariant, level_batch,
+                                              level_operators, lift, pooling)
 from tg_intrinsic.pool import ParallelTransportPool, ParallelTransportUnpool
 
 
@@ -40,6 +40,9 @@ class HSNSegmentation(HSNBase):
             the one-stream ablation. (default: :obj:`1`)
         rings (int, optional): Rings of the radial profiles.
             (default: :obj:`6`)
+        norm (str, optional): The blocks' normalisation, see
+            :class:`HarmonicResNetBlock`: :obj:`'instance'` (per shape),
+            :obj:`'batch'` or :obj:`None`. (default: :obj:`'instance'`)
 
     Shapes:
         - **input:** a (batched) :class:`~tg_intrinsic.data.IntrinsicData`
@@ -47,19 +50,21 @@ class HSNSegmentation(HSNBase):
     """
     def __init__(self, in_channels: int, num_classes: int,
                  channels: Sequence[int] = (16, 32), max_order: int = 1,
-                 rings: int = 6):
-        super().__init__(in_channels, num_classes, channels, max_order, rings)
+                 rings: int = 6, norm: Optional[str] = 'instance'):
+        super().__init__(in_channels, num_classes, channels, max_order, rings,
+                         norm)
         c0, c1 = self.channels
         p = max_order
-        self.enc0 = torch.nn.ModuleList([
-            HarmonicResNetBlock(c0, c0, p, rings, prev_order=0),
-            HarmonicResNetBlock(c0, c0, p, rings, prev_order=p)])
-        self.enc1 = torch.nn.ModuleList([
-            HarmonicResNetBlock(c0, c1, p, rings, prev_order=p),
-            HarmonicResNetBlock(c1, c1, p, rings, prev_order=p)])
-        self.dec0 = torch.nn.ModuleList([
-            HarmonicResNetBlock(c0 + c1, c0, p, rings, prev_order=p),
-            HarmonicResNetBlock(c0, c0, p, rings, prev_order=p)])
+
+        def blocks(c_in, c_out, first_order=p):
+            return torch.nn.ModuleList([
+                HarmonicResNetBlock(c_in, c_out, p, rings, first_order,
+                                    norm=norm),
+                HarmonicResNetBlock(c_out, c_out, p, rings, p, norm=norm)])
+
+        self.enc0 = blocks(c0, c0, first_order=0)
+        self.enc1 = blocks(c0, c1)
+        self.dec0 = blocks(c0 + c1, c0)
         self.pool = ParallelTransportPool()
         self.unpool = ParallelTransportUnpool()
         self.conv = HarmonicConv(c0, num_classes, p, rings, prev_order=p,
@@ -74,16 +79,18 @@ class HSNSegmentation(HSNBase):
         x = input_features(data, self.in_channels)
         o = self.max_order + 1
         ops0 = level_operators(data, 0, x.size(0), [(1, o), (o, o)])
+        batch0, shapes = level_batch(data, 0, x.size(0), x)
         z = lift(F.relu(self.lin(x)))
         for block in self.enc0:
-            z = block(z, ops0)
+            z = block(z, ops0, batch0, shapes)
         cluster, angle, n1 = pooling(data, 1)
         ops1 = level_operators(data, 1, n1, [(o, o)])
+        batch1, _ = level_batch(data, 1, n1, x)
         coarse = self.pool(z, cluster, angle, n1)
         for block in self.enc1:
-            coarse = block(coarse, ops1)
+            coarse = block(coarse, ops1, batch1, shapes)
         z = torch.cat([z, self.unpool(coarse, cluster, angle)], dim=2)
         for block in self.dec0:
-            z = block(z, ops0)
+            z = block(z, ops0, batch0, shapes)
         z = self.conv(z, operator=ops0[(o, o)])
         return invariant(z) + self.bias

@@ -7,10 +7,13 @@ from torch_geometric.data import Data
 
 from tg_intrinsic.geometry.checks import check_channels, check_positive_int
 from tg_intrinsic.nn.harmonic_conv import HarmonicConv
-from tg_intrinsic.nn.harmonic_resnet_block import HarmonicResNetBlock
+from tg_intrinsic.geometry.checks import check_choice
+from tg_intrinsic.nn.harmonic_resnet_block import (COMPLEX_NORMS,
+                                                   HarmonicResNetBlock,
+                                                   norm_repr)
 from tg_intrinsic.nn.models._hsn_base import (input_features, invariant,
-                                              level_operators, lift,
-                                              pooling)
+                                              level_batch, level_operators,
+                                              lift, pooling)
 from tg_intrinsic.pool import ParallelTransportPool, ParallelTransportUnpool
 
 
@@ -68,6 +71,9 @@ class HSNUResNet(torch.nn.Module):
             precomputed). (default: :obj:`6`)
         blocks (int, optional): ResNet blocks per stack.
             (default: :obj:`2`)
+        norm (str, optional): The blocks' normalisation, see
+            :class:`HarmonicResNetBlock`: :obj:`'instance'` (per shape),
+            :obj:`'batch'` or :obj:`None`. (default: :obj:`'instance'`)
 
     Shapes:
         - **input:** a (batched) :class:`~tg_intrinsic.data.IntrinsicData`
@@ -76,7 +82,8 @@ class HSNUResNet(torch.nn.Module):
     """
     def __init__(self, in_channels: int, out_channels: Optional[int] = None,
                  channels: Sequence[int] = (16, 32), max_order: int = 1,
-                 rings: int = 6, blocks: int = 2):
+                 rings: int = 6, blocks: int = 2,
+                 norm: Optional[str] = 'instance'):
         super().__init__()
         self.in_channels = check_positive_int(in_channels, 'in_channels')
         self.out_channels = None if out_channels is None else \
@@ -86,13 +93,15 @@ class HSNUResNet(torch.nn.Module):
                                             minimum=0)
         self.rings = check_positive_int(rings, 'rings')
         self.blocks = check_positive_int(blocks, 'blocks')
+        self.norm = check_choice(norm, 'norm', COMPLEX_NORMS)
         c, p = self.channels, self.max_order
 
         def stack(c_in, c_out, first_order=p):
             return torch.nn.ModuleList([
                 HarmonicResNetBlock(c_in if b == 0 else c_out, c_out, p,
                                     rings, prev_order=first_order if b == 0
-                                    else p) for b in range(blocks)])
+                                    else p, norm=norm)
+                for b in range(blocks)])
 
         self.lin = torch.nn.Linear(in_channels, c[0])
         self.enc = torch.nn.ModuleList(
@@ -129,26 +138,29 @@ class HSNUResNet(torch.nn.Module):
         o = self.max_order + 1
         ops = [level_operators(data, 0, x.size(0), [(1, o), (o, o)])]
         pools = [None]
+        batch, shapes = level_batch(data, 0, x.size(0), x)
+        batches = [batch]
         for level in range(1, self.num_levels):
             cluster, angle, size = pooling(data, level)
             pools.append((cluster, angle, size))
             ops.append(level_operators(data, level, size, [(o, o)]))
+            batches.append(level_batch(data, level, size, x)[0])
         z = lift(F.relu(self.lin(x)))
         skips = []
         for level, stack in enumerate(self.enc):
             if level > 0:
                 z = self.pool(z, *pools[level])
             for block in stack:
-                z = block(z, ops[level])
+                z = block(z, ops[level], batches[level], shapes)
             skips.append(z)
         for block in self.mid:
-            z = block(z, ops[-1])
+            z = block(z, ops[-1], batches[-1], shapes)
         for level in range(self.num_levels - 2, -1, -1):
             cluster, angle, _ = pools[level + 1]
             z = torch.cat([skips[level], self.unpool(z, cluster, angle)],
                           dim=2)
             for block in self.dec[level]:
-                z = block(z, ops[level])
+                z = block(z, ops[level], batches[level], shapes)
         if self.conv is None:
             return invariant(z)
         z = self.conv(z, operator=ops[0][(o, o)])
@@ -158,4 +170,4 @@ class HSNUResNet(torch.nn.Module):
         return (f'{self.__class__.__name__}({self.in_channels}, '
                 f'{self.out_channels}, channels={self.channels}, '
                 f'max_order={self.max_order}, rings={self.rings}, '
-                f'blocks={self.blocks})')
+                f'blocks={self.blocks}' + norm_repr(self.norm) + ')')

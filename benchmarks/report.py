@@ -795,7 +795,16 @@ def normalisation(d, _):
                 if r['model'] == model and r['norm'] == norm]
 
     hsn = {norm: of('hsn', norm) for norm in ('batch', 'instance', 'none')}
-    batch, deltanet = hsn['batch'], of('deltanet', 'batch')
+    batch = hsn['batch']
+
+    def deltanet(run):
+        return (f"{run['epochs']} epochs: running statistics "
+                f"{pct(run['eval'], 1)}, **recalibrated (default) "
+                f"{pct(run['recalibrated'], 1)}**, batch statistics "
+                f"{pct(run['batch_statistics'], 1)} (" + span_pct(
+                    run['batch_statistics_shuffles'], 1) + " over "
+                f"{len(run['batch_statistics_shuffles'])} cuts of the test "
+                f"set into batches)")
     result = (
         f"same weights, test accuracy in eval mode vs with batch statistics "
         f"(mean of {len(batch)} seeds). HSN, hsn-shrec11 protocol (batch "
@@ -806,11 +815,8 @@ def normalisation(d, _):
         f"ComplexInstanceNorm (default) "
         f"{pct(mean(hsn['instance'], 'eval'), 1)} in both**; no "
         f"normalisation {pct(mean(hsn['none'], 'eval'), 1)}. DeltaNet, "
-        f"deltanet-modelnet40 protocol (batch 32, 20 epochs) on "
-        f"SyntheticModelNet: running statistics "
-        f"{pct(mean(deltanet, 'eval'), 1)}, **recalibrated (default) "
-        f"{pct(mean(deltanet, 'recalibrated'), 1)}**, batch statistics "
-        f"{pct(mean(deltanet, 'batch_statistics'), 1)}")
+        f"deltanet-modelnet40 protocol (batch 32) on SyntheticModelNet, "
+        + '; '.join(deltanet(r) for r in of('deltanet', 'batch')))
     return [('Evaluation that matches training: normalisation of HSN and '
              'DeltaNet', 'normalisation.py', result)]
 

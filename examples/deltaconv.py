@@ -25,13 +25,13 @@ import time
 
 import torch
 import torch.nn.functional as F
-from torch_geometric.data import Batch
 from torch_geometric.loader import DataLoader
 from torch_geometric.transforms import Compose, RandomScale
 
 from tg_intrinsic.datasets import SyntheticModelNet
 from tg_intrinsic.geometry import SurfaceOperators, build_mls_operators
 from tg_intrinsic.geometry.appearance.sh import fibonacci_sphere
+from tg_intrinsic.nn import recalibrate_batch_norm
 from tg_intrinsic.nn.models import DeltaNetClassification
 from tg_intrinsic.transforms import RandomRotation
 
@@ -88,33 +88,6 @@ def accuracy(model, loader):
         correct += int((model(batch).argmax(-1) == batch.y.view(-1)).sum())
         total += batch.y.numel()
     return correct / total
-
-
-@torch.no_grad()
-def recalibrate_batch_norm(model, items):
-    """Sets every BatchNorm's running mean and variance to the statistics of
-    one training-mode pass over all of ``items`` as a single batch
-    (momentum 1 for that pass).
-
-    Why: the running variance starts at 1 and moves towards the batch
-    variance by 10% per training step, while the features DeltaNet's first
-    layer normalises are tiny (at initialisation the variances of its
-    vector norms are 2e-7 to 2e-5, of its scalars 3e-3 to 3e-2). After the
-    few dozen steps of this example the running statistics are still far
-    off (it takes ~130 steps to forget the 1), and evaluation-mode
-    predictions can sit at chance level (the library's own training loop
-    shows the same lag in its first epochs: ``benchmarks/results/
-    deltanet_accuracy.json`` has test accuracy 0.083 at epoch 6). Both
-    accuracies are printed."""
-    norms = [m for m in model.modules()
-             if isinstance(m, torch.nn.modules.batchnorm._BatchNorm)]
-    saved = [m.momentum for m in norms]
-    for m in norms:
-        m.momentum = 1.0
-    model.train()
-    model(Batch.from_data_list(items))
-    for m, momentum in zip(norms, saved):
-        m.momentum = momentum
 
 
 def train_deltanet(root, quick, epochs, seed):
@@ -176,7 +149,10 @@ def train_deltanet(root, quick, epochs, seed):
         schedule.step()
         print(f"  epoch {epoch}: train loss {total / len(train_set):.3f}")
     running = accuracy(model, test_loader)
-    recalibrate_batch_norm(model, train_set)
+    # The running statistics of a few dozen steps lag behind the weights
+    # (evaluation can sit at chance level): recompute them under the
+    # final weights over the training shapes, as `train` does.
+    recalibrate_batch_norm(model, DataLoader(train_set, batch_size=8))
     test = accuracy(model, test_loader)
     chance = 1 / len(names)
     print(f"DeltaNet test accuracy: {test:.3f} after {epochs} epochs "

@@ -412,14 +412,14 @@ def test_on_disk_training_equals_in_memory(tmp_path, modelnet_root):
 
 
 # Issue 29's reproduction, smaller: HSN's SHREC'11 protocol (batch 1,
-# Adam 1e-2, rotations and scaling) on generated meshes. With batch norm,
-# eval mode scored far below the same weights with per-mesh statistics
-# (measured here: see below); the default per-mesh normalisation makes
-# them one function, and the reported accuracy is what eval-mode
-# inference on the checkpoint gives.
+# Adam 1e-2, rotations and scaling) on generated meshes (3 + 3 per class).
+# With batch norm, eval mode scored far below the same weights with
+# per-mesh statistics (measured: 25.0% vs 52.8%); the default per-mesh
+# normalisation makes them one function (52.8%), and the reported
+# accuracy is what eval-mode inference on the checkpoint gives.
 HSN_SHREC = ['--model', 'hsn', '--dataset', 'synthetic_shrec',
              '--shapes-per-class', '6', '--num-vertices', '150', '200',
-             '--epochs', '8', '--eval-every', '4', '--quiet']
+             '--epochs', '15', '--eval-every', '15', '--quiet']
 
 
 @pytest.fixture(scope='module')
@@ -434,7 +434,7 @@ def test_hsn_eval_mode_scores_what_training_learned(tmp_path,
     final = metrics['final_test_accuracy']
     assert final == rescored_accuracy(metrics)
     assert final == metrics['final_test_accuracy_batch_statistics']
-    assert final >= 0.5   # 12 classes: chance is 0.083
+    assert final >= 0.4   # 12 classes: chance is 0.083
     # the failure it guards against: batch norm's running statistics,
     # with one mesh per batch, fit no mesh
     batch_norm = main(HSN_SHREC + ['--root', str(small_shrec_root), '--out',
@@ -443,4 +443,24 @@ def test_hsn_eval_mode_scores_what_training_learned(tmp_path,
     assert batch_norm['final_test_accuracy'] == \
         rescored_accuracy(batch_norm)
     assert batch_norm['final_test_accuracy_batch_statistics'] - \
-        batch_norm['final_test_accuracy'] >= 0.1
+        batch_norm['final_test_accuracy'] >= 0.15
+
+
+def test_resuming_an_hsn_checkpoint_of_another_normalisation(
+        tmp_path, small_shrec_root):
+    # checkpoints written before --hsn-norm existed hold batch norm
+    # statistics; resuming one into the per-mesh default is refused with
+    # the flag that loads it
+    args = HSN_SHREC + ['--root', str(small_shrec_root), '--out',
+                        str(tmp_path / 'run'), '--eval-every', '1']
+    main(args + ['--epochs', '1', '--hsn-norm', 'batch'])
+    path = tmp_path / 'run' / 'checkpoint.pt'
+    state = torch.load(path, weights_only=False)
+    del state['args']['hsn_norm']
+    torch.save(state, path)
+    with pytest.raises(ValueError, match='was trained with --hsn-norm '
+                       'batch; resume it with --hsn-norm batch'):
+        main(args + ['--epochs', '2', '--resume'])
+    metrics = main(args + ['--epochs', '2', '--resume', '--hsn-norm',
+                           'batch'])
+    assert [h['epoch'] for h in metrics['history']] == [1, 2]

@@ -669,6 +669,14 @@ def _train(args, device) -> Dict:
     state = distributed.broadcast_object(state)
     history: List[Dict] = []
     start_epoch = 1
+    if state is not None and args.model == 'hsn':
+        # checkpoints from before --hsn-norm were trained with batch norm
+        saved = state.get('args', {}).get('hsn_norm', 'batch')
+        if saved != args.hsn_norm:
+            raise ValueError(f"{checkpoint_path} was trained with "
+                             f"--hsn-norm {saved}; resume it with "
+                             f"--hsn-norm {saved}, or start a new run in "
+                             f"another --out")
     if state is not None:
         # Written by any number of processes: the batches and random draws
         # of an epoch depend on (seed, epoch) only, so the generators'

@@ -17,7 +17,11 @@ class ComplexBatchNorm(torch.nn.Module):
     Centring would change phases, so the magnitudes are only rescaled,
     which commutes with every gauge change. The statistics are means over
     points, so a batch of many small shapes and one of a single large shape
-    are treated alike; in eval mode the running mean square is used.
+    are treated alike; in eval mode the running mean square is used. With
+    one shape per batch (the HSN papers' protocols) that running average
+    fits no single shape and eval mode scores far below training:
+    :class:`ComplexInstanceNorm`, the HSN models' default, normalises per
+    shape in both modes.
 
     Args:
         channels (int): Channels :math:`C`.

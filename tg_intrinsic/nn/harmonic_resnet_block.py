@@ -54,8 +54,8 @@ class HarmonicResNetBlock(torch.nn.Module):
     :class:`ComplexLinear` without bias when the widths differ),
 
     .. math::
-        \mathbf{z}' = \sigma\Big(\mathrm{BN}\big(
-        \mathrm{conv}_2(\sigma(\mathrm{BN}(\mathrm{conv}_1 \mathbf{z})))
+        \mathbf{z}' = \sigma\Big(\mathrm{N}\big(
+        \mathrm{conv}_2(\sigma(\mathrm{N}(\mathrm{conv}_1 \mathbf{z})))
         \big) + S\mathbf{z}\Big).
 
     Args:

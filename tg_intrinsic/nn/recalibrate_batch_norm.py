@@ -67,8 +67,9 @@ def recalibrate_batch_norm(model: torch.nn.Module, batches: Iterable,
         model (torch.nn.Module): The model; changed in place.
         batches (Iterable): Batches as the model takes them (the training
             examples without augmentation, in the training batch size).
-        device (torch.device, optional): Where to move each batch.
-            (default: :obj:`None`: left where it is)
+        device (torch.device, optional): Where to move each batch (the
+            batches given stay where they are).
+            (default: :obj:`None`: used where they are)
         process_group (optional): See above. (default: :obj:`None`)
 
     Returns the number of batches used (0: :obj:`model` has no batch
@@ -91,8 +92,8 @@ def recalibrate_batch_norm(model: torch.nn.Module, batches: Iterable,
             else:
                 m.momentum = 1.0    # running_square <- this batch's value
         for batch in batches:
-            if device is not None:
-                batch = batch.to(device)
+            if device is not None:   # a shallow copy: the caller's stays
+                batch = copy.copy(batch).to(device)
             model(batch)
             count += 1
             for m in squares:

@@ -464,3 +464,12 @@ def test_resuming_an_hsn_checkpoint_of_another_normalisation(
     metrics = main(args + ['--epochs', '2', '--resume', '--hsn-norm',
                            'batch'])
     assert [h['epoch'] for h in metrics['history']] == [1, 2]
+
+
+def test_batches_for_batch_statistics_never_hold_a_lone_shape():
+    from tg_intrinsic.train import whole_batches
+    assert whole_batches(5, 4) == [[0, 1, 2, 3, 4]]
+    assert whole_batches(9, 4) == [[0, 1, 2, 3], [4, 5, 6, 7, 8]]
+    assert whole_batches(8, 4) == [[0, 1, 2, 3], [4, 5, 6, 7]]
+    assert whole_batches(3, 8) == [[0, 1, 2]]
+    assert whole_batches(3, 1) == [[0], [1], [2]]

@@ -35,8 +35,9 @@ the current weights before every evaluation
 (:func:`~tg_intrinsic.nn.recalibrate_batch_norm` over up to
 ``RECALIBRATION_BATCHES`` training batches without augmentation). Every
 evaluation also records ``test_accuracy_batch_statistics``, the same
-weights normalised by each (shuffled) test batch's own statistics, and
-the log says so when the two differ by more than a point
+weights normalised by each (shuffled) test batch's own statistics (not
+with fewer than two test shapes per process), and the log says so when
+the two differ by more than a point
 (``benchmarks/normalisation.py`` measures why both are needed).
 
 Runs are reproducible: ``--seed`` seeds the model's initialisation and,
@@ -89,6 +90,8 @@ from tqdm import tqdm
 
 from tg_intrinsic import distributed
 from tg_intrinsic.io.figures import save_figure
+from tg_intrinsic.nn.harmonic_resnet_block import (COMPLEX_NORMS,
+                                                   DEFAULT_COMPLEX_NORM)
 from tg_intrinsic.nn.recalibrate_batch_norm import (batch_norms,
                                                     batch_statistics_copy,
                                                     recalibrate_batch_norm)
@@ -532,6 +535,15 @@ CSV_COLUMNS = ('epoch', 'train_loss', 'train_accuracy', 'test_accuracy',
 RECALIBRATION_BATCHES = 200
 
 
+def whole_batches(length: int, batch_size: int) -> List[List[int]]:
+    """``range(length)`` in batches of :obj:`batch_size`, the remainder
+    joined to the last batch: batch statistics need at least two shapes in
+    every batch (when :obj:`length` is at least 2)."""
+    count = max(1, length // batch_size)
+    bounds = [b * batch_size for b in range(count)] + [length]
+    return [list(range(bounds[b], bounds[b + 1])) for b in range(count)]
+
+
 def statistics_gap(record: Dict, points: float = 1.0) -> str:
     """A note for the log when the test accuracy with batch statistics
     differs from the eval-mode one by more than :obj:`points` points."""
@@ -700,9 +712,11 @@ def _train(args, device) -> Dict:
     # augmentation, in training batches (the same count on every process)
     shuffled = np.random.default_rng(distributed.derived_seed(
         args.seed, 0, 1)).permutation(len(test_items))
-    shuffled_test_loader = DataLoader(
-        [test_items[i] for i in distributed.shard(shuffled, rank, world)],
-        args.batch_size)
+    shuffled_test_loader = None if len(test_items) // world < 2 else \
+        DataLoader([test_items[i] for i in distributed.shard(
+            shuffled, rank, world)], batch_sampler=whole_batches(
+                len(distributed.shard(shuffled, rank, world)),
+                args.batch_size))
     recalibration = distributed.epoch_batches(
         len(train_set), args.batch_size, args.seed, 0, rank,
         world)[:RECALIBRATION_BATCHES]
@@ -770,8 +784,11 @@ def _train(args, device) -> Dict:
                 record['test_miou'] = scores['miou']
             # with batch statistics (per shape at batch size 1): the same
             # by construction without batch norms
-            record['test_accuracy_batch_statistics'] = scores['accuracy'] \
-                if not has_batch_norm else evaluate(
+            if not has_batch_norm:
+                record['test_accuracy_batch_statistics'] = \
+                    scores['accuracy']
+            elif shuffled_test_loader is not None:
+                record['test_accuracy_batch_statistics'] = evaluate(
                     model, shuffled_test_loader, device, part_mask,
                     statistics='batch')['accuracy']
         history.append(record)
@@ -914,12 +931,12 @@ def add_arguments(parser, model_and_dataset: bool = True):
     add('--max-order', type=int, default=None,
         help='protocol; hsn: highest rotation order (0: one stream)')
     add('--rings', type=int, default=None, help='protocol')
-    add('--hsn-norm', default='instance', choices=['instance', 'batch',
-                                                   'none'],
+    add('--hsn-norm', default=DEFAULT_COMPLEX_NORM,
+        choices=[norm or 'none' for norm in COMPLEX_NORMS],
         help='hsn: normalisation in the blocks; instance (statistics per '
         'mesh, the same in training and evaluation), batch (running '
         'statistics in evaluation; with one mesh per batch they fit no '
-        'mesh) or none (default: instance)')
+        f'mesh) or none (default: {DEFAULT_COMPLEX_NORM})')
     add('--radius', type=float, default=None,
         help='protocol; hsn: disc radius on unit-area meshes')
     add('--resample-vertices', type=int, default=None,

@@ -41,7 +41,6 @@ class HSNBase(torch.nn.Module):
                 + norm_repr(self.norm) + ')')
 
 
-
 def level_key(name: str, level: int) -> str:
     return name if level == 0 else f'{name}_{level}'
 

@@ -5,11 +5,15 @@ from torch import Tensor
 from torch_geometric.data import Data
 from torch_geometric.nn import global_mean_pool
 
-from tg_intrinsic.geometry.checks import check_channels, check_positive_int
+from tg_intrinsic.geometry.checks import (check_channels, check_choice,
+                                          check_positive_int)
 from tg_intrinsic.nn.complex_relu import ComplexReLU
 from tg_intrinsic.nn.harmonic_conv import HarmonicConv
-from tg_intrinsic.nn.harmonic_resnet_block import (apply_complex_norm,
-                                                   complex_norm, norm_repr)
+from tg_intrinsic.nn.harmonic_resnet_block import (COMPLEX_NORMS,
+                                                   DEFAULT_COMPLEX_NORM,
+                                                   apply_complex_norm,
+                                                   complex_norm,
+                                                   norm_repr)
 from tg_intrinsic.nn.models._hsn_base import (input_features, invariant,
                                               level_batch, level_operators,
                                               pooling)
@@ -75,7 +79,7 @@ class HSNConvClassification(torch.nn.Module):
     def __init__(self, in_channels: int, num_classes: int,
                  channels: Sequence[int] = (8, 16, 32),
                  convs_per_level: int = 2, max_order: int = 1,
-                 rings: int = 6, norm: Optional[str] = 'instance'):
+                 rings: int = 6, norm: Optional[str] = DEFAULT_COMPLEX_NORM):
         super().__init__()
         self.in_channels = check_positive_int(in_channels, 'in_channels')
         self.num_classes = check_positive_int(num_classes, 'num_classes')
@@ -84,7 +88,7 @@ class HSNConvClassification(torch.nn.Module):
                                                   'convs_per_level')
         self.max_order = check_positive_int(max_order, 'max_order', 0)
         self.rings = check_positive_int(rings, 'rings')
-        self.norm = norm
+        self.norm = check_choice(norm, 'norm', COMPLEX_NORMS)
         self.convs = torch.nn.ModuleList()
         self.norms = torch.nn.ModuleList()
         self.acts = torch.nn.ModuleList()

@@ -6,7 +6,8 @@ from torch import Tensor
 from torch_geometric.data import Data
 
 from tg_intrinsic.geometry.checks import check_positive_int
-from tg_intrinsic.nn.harmonic_resnet_block import norm_repr
+from tg_intrinsic.nn.harmonic_resnet_block import (DEFAULT_COMPLEX_NORM,
+                                                   norm_repr)
 from tg_intrinsic.nn.models.hsn_u_resnet import HSNUResNet
 
 
@@ -51,7 +52,7 @@ class HSNCorrespondence(torch.nn.Module):
     def __init__(self, in_channels: int, num_template_vertices: int,
                  channels: Sequence[int] = (16, 32), max_order: int = 1,
                  rings: int = 6, hidden: int = 256, dropout: float = 0.5,
-                 norm: Optional[str] = 'instance'):
+                 norm: Optional[str] = DEFAULT_COMPLEX_NORM):
         super().__init__()
         self.num_template_vertices = check_positive_int(
             num_template_vertices, 'num_template_vertices')

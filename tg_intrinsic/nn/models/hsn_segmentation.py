@@ -6,7 +6,8 @@ from torch import Tensor
 from torch_geometric.data import Data
 
 from tg_intrinsic.nn.harmonic_conv import HarmonicConv
-from tg_intrinsic.nn.harmonic_resnet_block import HarmonicResNetBlock
+from tg_intrinsic.nn.harmonic_resnet_block import (DEFAULT_COMPLEX_NORM,
+                                                   HarmonicResNetBlock)
 from tg_intrinsic.nn.models._hsn_base import (HSNBase, input_features,
                                               invariant, level_batch,
                                               level_operators, lift, pooling)
@@ -50,7 +51,7 @@ class HSNSegmentation(HSNBase):
     """
     def __init__(self, in_channels: int, num_classes: int,
                  channels: Sequence[int] = (16, 32), max_order: int = 1,
-                 rings: int = 6, norm: Optional[str] = 'instance'):
+                 rings: int = 6, norm: Optional[str] = DEFAULT_COMPLEX_NORM):
         super().__init__(in_channels, num_classes, channels, max_order, rings,
                          norm)
         c0, c1 = self.channels

@@ -9,6 +9,7 @@ from tg_intrinsic.geometry.checks import check_channels, check_positive_int
 from tg_intrinsic.nn.harmonic_conv import HarmonicConv
 from tg_intrinsic.geometry.checks import check_choice
 from tg_intrinsic.nn.harmonic_resnet_block import (COMPLEX_NORMS,
+                                                   DEFAULT_COMPLEX_NORM,
                                                    HarmonicResNetBlock,
                                                    norm_repr)
 from tg_intrinsic.nn.models._hsn_base import (input_features, invariant,
@@ -83,7 +84,7 @@ class HSNUResNet(torch.nn.Module):
     def __init__(self, in_channels: int, out_channels: Optional[int] = None,
                  channels: Sequence[int] = (16, 32), max_order: int = 1,
                  rings: int = 6, blocks: int = 2,
-                 norm: Optional[str] = 'instance'):
+                 norm: Optional[str] = DEFAULT_COMPLEX_NORM):
         super().__init__()
         self.in_channels = check_positive_int(in_channels, 'in_channels')
         self.out_channels = None if out_channels is None else \

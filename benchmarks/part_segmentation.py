@@ -107,7 +107,11 @@ def run(name, train_items, test_items, dataset, args):
     shuffled_test_loader = DataLoader(
         test_items, batch_size=args.batch_size, shuffle=True,
         generator=torch.Generator().manual_seed(1))
-    recalibration_loader = DataLoader(train_items, batch_size=args.batch_size)
+    # shuffled like the training batches: batches of one category each
+    # would average within-category statistics
+    recalibration_loader = DataLoader(
+        train_items, batch_size=args.batch_size, shuffle=True,
+        generator=torch.Generator().manual_seed(2))
     history = []
     for epoch in range(1, args.epochs + 1):
         model.train()

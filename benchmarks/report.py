@@ -1212,13 +1212,19 @@ def part_segmentation(d, _):
         return values[half] if len(values) % 2 else \
             (values[half - 1] + values[half]) / 2
 
+    def batch_statistics(r):
+        value = r.get('final_instance_miou_batch_statistics')
+        return '' if value is None else \
+            f", batch statistics {pct(value, 1)}"
+
     runs = ', '.join(
         f"{r['label']} **{pct(r['final_instance_miou'], 1)}** / "
         f"{pct(r['final_class_miou'], 1)} ({r['parameters'] / 1e6:.2f}M "
         f"parameters, median "
         f"{seconds(median([h['seconds'] for h in r['history']]))} s per "
-        f"epoch)" for r in d['runs'])
-    result = (f"instance / class mIoU after {p['epochs']} epochs on "
+        f"epoch{batch_statistics(r)})" for r in d['runs'])
+    result = (f"instance / class mIoU (eval mode, recalibrated batch "
+              f"norms) after {p['epochs']} epochs on "
               f"{5 * p['train_per_category']} training shapes of "
               f"{p['num_points']} points, {5 * p['test_per_category']} "
               f"test shapes (10 per category, so the two agree), one "
@@ -1360,7 +1366,9 @@ def ddp_training(d, _):
             f"{seconds(one_1)}, 2 processes x 1 thread {seconds(two)} "
             f"(speed-up {times(one_2 / two, 2)} over 1 process x 2 "
             f"threads, {times(one_1 / two, 2)} over 1 thread), with sync "
-            f"BN {seconds(sync)}; GPUs: {gpu}"))
+            f"BN {seconds(sync)}"
+            + (" (HSN normalises per mesh: nothing to synchronise)"
+               if model == 'hsn' else '') + f"; GPUs: {gpu}"))
     return rows
 
 

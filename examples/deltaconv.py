@@ -151,8 +151,10 @@ def train_deltanet(root, quick, epochs, seed):
     running = accuracy(model, test_loader)
     # The running statistics of a few dozen steps lag behind the weights
     # (evaluation can sit at chance level): recompute them under the
-    # final weights over the training shapes, as `train` does.
-    recalibrate_batch_norm(model, DataLoader(train_set, batch_size=8))
+    # final weights over shuffled training batches, as `train` does.
+    recalibrate_batch_norm(model, DataLoader(
+        train_set, batch_size=8, shuffle=True,
+        generator=torch.Generator().manual_seed(seed)))
     test = accuracy(model, test_loader)
     chance = 1 / len(names)
     print(f"DeltaNet test accuracy: {test:.3f} after {epochs} epochs "

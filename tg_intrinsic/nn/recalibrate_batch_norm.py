@@ -65,8 +65,11 @@ def recalibrate_batch_norm(model: torch.nn.Module, batches: Iterable,
 
     Args:
         model (torch.nn.Module): The model; changed in place.
-        batches (Iterable): Batches as the model takes them (the training
-            examples without augmentation, in the training batch size).
+        batches (Iterable): Batches as the model takes them, drawn as in
+            training: shuffled, in the training batch size (the training
+            examples without augmentation). Batches that each hold one
+            class or category would average within-class statistics,
+            which normalise the test set wrongly.
         device (torch.device, optional): Where to move each batch (the
             batches given stay where they are).
             (default: :obj:`None`: used where they are)

@@ -85,14 +85,13 @@ def check_missing_level_is_explained(model_class, key, match):
 
 
 def check_training_equals_evaluation(make_model, data_list):
-    """With the default normalisation (per shape), a model computes the
-    same function in training and evaluation mode, and a shape's outputs
-    do not depend on the other shapes of its batch; with batch norm they
-    do (so the check can fail). ``make_model(norm)`` builds the model,
-    ``norm=None`` leaving the default."""
+    """With the per-shape normalisation, a model computes the same function
+    in training and evaluation mode, and a shape's outputs do not depend
+    on the other shapes of its batch; with batch norm they do (so the
+    check can fail). ``make_model(norm)`` builds the model."""
     batch = Batch.from_data_list(data_list)
     torch.manual_seed(0)
-    model = make_model(None).double()
+    model = make_model('instance').double()
     for module in model.modules():   # no dropout: compare the normalisation
         if isinstance(module, torch.nn.Dropout):
             module.p = 0.0

@@ -74,8 +74,8 @@ def test_missing_levels_are_explained(key, match):
     check_missing_level_is_explained(HSNClassification, key, match)
 
 
-def make(norm):
-    norm = {} if norm is None else {'norm': norm}
+def make(norm='default'):
+    norm = {} if norm == 'default' else {'norm': norm}
     return HSNClassification(3, 5, channels=(4, 6), rings=RINGS, **norm)
 
 
@@ -84,5 +84,7 @@ def test_training_and_evaluation_compute_the_same_function():
         make, [two_level_data(s, max_order=1) for s in (1, 2, 3)])
 
 
-def test_norm_is_validated():
+def test_norm_is_validated_and_per_mesh_by_default():
     check_norm_is_validated(make)
+    assert make().norm == 'instance'
+    assert make(None).norm is None

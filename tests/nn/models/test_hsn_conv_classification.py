@@ -101,13 +101,10 @@ def test_the_three_level_network_ignores_turns(digits, max_order):
     a turn by 72 degrees keeps the logits to rounding; other angles
     resample the digit, which moves them by a small fraction of how much
     they differ between digits (0.25% measured; with the cells of
-    MultiscaleSupports, which break ties by index, up to 30%). Without
-    normalisation: an untrained net's per-digit normalisation shrinks the
-    spread between digits (9% here), which is not what is measured."""
+    MultiscaleSupports, which break ties by index, up to 30%)."""
     from tg_intrinsic.datasets.sphere_digits import rotation_about_z
     torch.manual_seed(0)
-    model = HSNConvClassification(1, 10, max_order=max_order,
-                                  norm=None).double()
+    model = HSNConvClassification(1, 10, max_order=max_order).double()
     model.eval()
     logits = torch.cat([model(digits[i]) for i in range(6)])
     spread = (logits - logits.mean(0)).norm(dim=1).mean()
@@ -118,8 +115,8 @@ def test_the_three_level_network_ignores_turns(digits, max_order):
             assert (model(turned) - logits[i]).norm() < bound * spread
 
 
-def make(norm):
-    norm = {} if norm is None else {'norm': norm}
+def make(norm='default'):
+    norm = {} if norm == 'default' else {'norm': norm}
     return HSNConvClassification(3, 5, channels=(4, 6), rings=RINGS, **norm)
 
 
@@ -128,5 +125,9 @@ def test_training_and_evaluation_compute_the_same_function():
         make, [two_level_data(s, max_order=1) for s in (1, 2, 3)])
 
 
-def test_norm_is_validated():
+def test_norm_is_validated_and_batch_norm_by_default():
+    # many digits share one mesh in large batches: batch norm is the
+    # default (per-digit normalisation cost 2-18 points on sphere digits)
     check_norm_is_validated(make)
+    assert make().norm == 'batch'
+    assert make(None).norm is None

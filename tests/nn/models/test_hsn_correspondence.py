@@ -73,8 +73,8 @@ def test_repr():
                            'dropout=0.5)')
 
 
-def make(norm):
-    norm = {} if norm is None else {'norm': norm}
+def make(norm='default'):
+    norm = {} if norm == 'default' else {'norm': norm}
     return HSNCorrespondence(3, 7, channels=(4, 6), rings=RINGS, hidden=8,
                              **norm)
 
@@ -84,5 +84,7 @@ def test_training_and_evaluation_compute_the_same_function():
         make, [two_level_data(s, max_order=1) for s in (1, 2, 3)])
 
 
-def test_norm_is_validated():
+def test_norm_is_validated_and_per_mesh_by_default():
     check_norm_is_validated(make)
+    assert make().backbone.norm == 'instance'
+    assert make(None).backbone.norm is None

@@ -242,8 +242,8 @@ def test_repr():
                            'max_order=2, rings=4, blocks=2)')
 
 
-def make(norm):
-    norm = {} if norm is None else {'norm': norm}
+def make(norm='default'):
+    norm = {} if norm == 'default' else {'norm': norm}
     return HSNUResNet(3, 5, channels=(4, 6, 8), rings=RINGS, **norm)
 
 
@@ -252,5 +252,7 @@ def test_training_and_evaluation_compute_the_same_function():
         make, [three_level_data(s) for s in (1, 2, 3)])
 
 
-def test_norm_is_validated():
+def test_norm_is_validated_and_per_mesh_by_default():
     check_norm_is_validated(make)
+    assert make().norm == 'instance'
+    assert make(None).norm is None

@@ -1366,9 +1366,7 @@ def ddp_training(d, _):
             f"{seconds(one_1)}, 2 processes x 1 thread {seconds(two)} "
             f"(speed-up {times(one_2 / two, 2)} over 1 process x 2 "
             f"threads, {times(one_1 / two, 2)} over 1 thread), with sync "
-            f"BN {seconds(sync)}"
-            + (" (HSN normalises per mesh: nothing to synchronise)"
-               if model == 'hsn' else '') + f"; GPUs: {gpu}"))
+            f"BN {seconds(sync)}; GPUs: {gpu}"))
     return rows
 
 

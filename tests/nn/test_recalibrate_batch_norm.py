@@ -114,11 +114,17 @@ def test_a_model_without_batch_norm_is_not_run():
     assert recalibrate_batch_norm(model, fail()) == 0
 
 
-def test_no_batches_is_an_error_and_changes_nothing_else():
+def test_no_batches_or_a_failing_batch_is_an_error_and_changes_nothing():
     model = RealAndComplex().train()
+    recalibrate_batch_norm(model, batches())
+    state = {k: v.clone() for k, v in model.state_dict().items()}
     with pytest.raises(ValueError, match="'batches' is empty"):
         recalibrate_batch_norm(model, [])
+    with pytest.raises(RuntimeError):   # the second batch has 5 features
+        recalibrate_batch_norm(model, [batches()[0], torch.randn(4, 5)])
     assert model.training and model.norm.momentum == 0.1
+    for key, value in model.state_dict().items():
+        assert torch.equal(value, state[key]), key
 
 
 def _recalibrate_on_processes(rank, world_size, folder, sync):

@@ -76,13 +76,17 @@ def recalibrate_batch_norm(model: torch.nn.Module, batches: Iterable,
         process_group (optional): See above. (default: :obj:`None`)
 
     Returns the number of batches used (0: :obj:`model` has no batch
-    norm, nothing was run).
+    norm, nothing was run). On an error (no batches, a failing forward)
+    the running statistics are left as they were.
     """
     norms = batch_norms(model)
     if not norms:
         return 0
     saved = {m: m.training for m in model.modules()}
     saved_momentum = {m: m.momentum for m in norms}
+    # restored if no recalibration comes of it (no batches, an error)
+    saved_buffers = [(buffer, buffer.clone()) for m in norms
+                     for buffer in m.buffers(recurse=False)]
     squares = {m: None for m in norms if isinstance(m, ComplexBatchNorm)}
     count = 0
     try:
@@ -109,6 +113,10 @@ def recalibrate_batch_norm(model: torch.nn.Module, batches: Iterable,
         for m, total in squares.items():
             m.running_square.copy_(total / count)
         _average_over_processes(norms, process_group)
+    except BaseException:
+        for buffer, value in saved_buffers:
+            buffer.copy_(value)
+        raise
     finally:
         for m, momentum in saved_momentum.items():
             m.momentum = momentum

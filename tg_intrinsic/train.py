@@ -710,13 +710,13 @@ def _train(args, device) -> Dict:
     # batch statistics of shuffled test batches (the test set is often
     # sorted by class); recalibration on the training items without
     # augmentation, in training batches (the same count on every process)
-    shuffled = np.random.default_rng(distributed.derived_seed(
-        args.seed, 0, 1)).permutation(len(test_items))
+    shuffled = distributed.shard(np.random.default_rng(
+        distributed.derived_seed(args.seed, 0, 1)).permutation(
+            len(test_items)), rank, world)
     shuffled_test_loader = None if len(test_items) // world < 2 else \
-        DataLoader([test_items[i] for i in distributed.shard(
-            shuffled, rank, world)], batch_sampler=whole_batches(
-                len(distributed.shard(shuffled, rank, world)),
-                args.batch_size))
+        DataLoader([test_items[i] for i in shuffled],
+                   batch_sampler=whole_batches(len(shuffled),
+                                               args.batch_size))
     recalibration = distributed.epoch_batches(
         len(train_set), args.batch_size, args.seed, 0, rank,
         world)[:RECALIBRATION_BATCHES]

@@ -278,3 +278,60 @@ def test_workers_give_identical_files(tmp_path, capsys):
     for name in ('a.pt', 'c.pt', os.path.join('sub', 'b.pt')):
         same(load(one / name), load(two / name))
         assert (one / name).read_bytes() == (two / name).read_bytes()
+
+
+def test_a_failed_overwrite_leaves_the_earlier_results(tmp_path, capsys):
+    src = make_folder(tmp_path / 'in')
+    out = tmp_path / 'out'
+    argv = ['--quiet', 'precompute', 'mls', str(src), str(out)]
+    assert cli(argv + ['--k', '3'], capsys)[0] == 0
+    before = {f: (out / f).read_bytes() for f in ('a.pt', 'sub/b.pt',
+                                                 'c.pt', 'precompute.json')}
+    # every file fails (a.obj has 42 points): the folder is as it was
+    code, _, stderr = cli(argv + ['--k', '100', '--overwrite'], capsys)
+    assert code == 2
+    assert 'fewer than --k 100; lower --k to at most 42' in stderr
+    assert 'still holds the earlier results' in stderr
+    assert {f: (out / f).read_bytes() for f in before} == before
+    # ... so a plain rerun with the new settings is told about the old ones
+    code, _, stderr = cli(argv + ['--k', '100'], capsys)
+    assert code == 2 and 'k 3 -> 100' in stderr
+    # a run that succeeds replaces them all, and leaves no staging folder
+    code, _, stderr = cli(argv + ['--k', '5', '--overwrite'], capsys)
+    assert code == 0, stderr
+    with open(out / 'precompute.json') as f:
+        assert json.load(f)['settings']['k'] == 5
+    assert load(out / 'a.pt').edge_index.size(1) == 42 * 5
+    assert sorted(os.listdir(tmp_path)) == ['in', 'out']
+
+
+def test_linked_folders_are_followed_once(tmp_path, capsys):
+    src = make_folder(tmp_path / 'in')
+    elsewhere = make_folder(tmp_path / 'elsewhere')
+    os.symlink(elsewhere / 'sub', src / 'linked')
+    os.symlink(src, src / 'sub' / 'loop')  # must not loop
+    out = tmp_path / 'out'
+    code, _, stderr = cli(['--quiet', 'precompute', 'gravo', src, out,
+                           '--lower-bound', '10'], capsys)
+    assert code == 0, stderr
+    assert (out / 'linked' / 'b.pt').exists()
+
+
+def test_files_precompute_did_not_write_need_overwrite(tmp_path, capsys):
+    src = make_folder(tmp_path / 'in')
+    out = tmp_path / 'out'
+    out.mkdir()
+    (out / 'notes.md').write_text('mine')
+    argv = ['--quiet', 'precompute', 'gravo', str(src), str(out),
+            '--lower-bound', '10']
+    code, _, stderr = cli(argv, capsys)
+    assert code == 2 and 'notes.md' in stderr and '--overwrite' in stderr
+    assert cli(argv + ['--overwrite'], capsys)[0] == 0
+    assert (out / 'notes.md').read_text() == 'mine'
+    # one output file that exists is replaced only with --overwrite
+    single = ['--quiet', 'precompute', 'gravo', str(src / 'a.obj'),
+              str(tmp_path / 'a.pt'), '--lower-bound', '10']
+    assert cli(single, capsys)[0] == 0
+    code, _, stderr = cli(single, capsys)
+    assert code == 2 and 'exists' in stderr and '--overwrite' in stderr
+    assert cli(single + ['--overwrite'], capsys)[0] == 0

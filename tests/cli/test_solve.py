@@ -18,7 +18,7 @@ from tg_intrinsic.io import read_surface, write_ply
 from tg_intrinsic.solvers import (conformal_flow, poisson, smooth,
                                   stiffness_and_mass)
 
-from tests.cli import run_cli
+from tests.cli import assert_user_error, run_cli
 
 # 162 vertices: ratio 4 and lower bound 10 give levels 162 -> 42 -> 10
 HIERARCHY = ['--ratio', '4', '--lower-bound', '10']
@@ -310,5 +310,190 @@ def test_as_a_subprocess(files, tmp_path):
     assert done.returncode == 0, done.stderr
     assert 'Traceback' not in done.stderr
     assert done.stdout.startswith('solved (M + alpha S) x = M y')
-    assert sorted(os.listdir(out)) == ['report.json', 'result.ply',
-                                       'result.png']
+    # and the record of the files this run wrote
+    assert sorted(os.listdir(out)) == ['.tg-intrinsic.json', 'report.json',
+                                       'result.ply', 'result.png']
+
+
+# ----------------------------------------------------------------------
+# The files other tools write, and result folders that are never damaged
+
+def _soup(tmp_path, pos, face, fmt):
+    """The sphere as a triangle soup: every triangle with its own three
+    vertices (STL always; many OBJ exporters)."""
+    path = str(tmp_path / f'soup.{fmt}')
+    soup = trimesh.Trimesh(pos[face].reshape(-1, 3),
+                           np.arange(3 * len(face)).reshape(-1, 3),
+                           process=False)
+    soup.export(path)
+    return path
+
+
+@pytest.mark.parametrize('fmt', ['stl', 'obj'])
+def test_a_triangle_soup_is_welded_into_one_surface(files, tmp_path, capsys,
+                                                    fmt):
+    paths, pos, face, _, _ = files
+    soup = _soup(tmp_path, pos, face, fmt)
+    out = str(tmp_path / 'out')
+    code, _, stderr = cli(['solve', soup, '--smooth', '1e-2', '--out', out,
+                           '--quiet'] + HIERARCHY, capsys)
+    assert code == 0, stderr
+    assert 'welded 798 vertices' in stderr and '960 -> 162' in stderr
+    welded, welded_face, _ = read_surface(os.path.join(out, 'result.ply'))
+    assert len(welded) == 162 and len(welded_face) == 320
+    # the same fairing as of the connected mesh (a torn surface would not)
+    code, _, _ = cli(['solve', paths['obj'], '--smooth', '1e-2', '--out',
+                      str(tmp_path / 'mesh'), '--quiet'] + HIERARCHY, capsys)
+    reference, _, _ = read_surface(str(tmp_path / 'mesh' / 'result.ply'))
+    assert np.abs(np.sort(welded, 0) - np.sort(reference, 0)).max() < 1e-12
+    # read without welding, the file is the soup it is
+    assert len(read_surface(soup, weld=False)[0]) == 960
+
+
+def test_a_signal_per_stored_vertex_follows_the_weld(files, tmp_path,
+                                                     capsys):
+    paths, pos, face, signal, _ = files
+    soup = _soup(tmp_path, pos, face, 'stl')
+    stored = signal[face.reshape(-1)]  # one row per corner as stored
+    np.save(tmp_path / 'stored.npy', stored)
+    out = str(tmp_path / 'out')
+    code, _, stderr = cli(['solve', soup, '--smooth', '1e-2', '--signal',
+                           str(tmp_path / 'stored.npy'), '--out', out,
+                           '--quiet'] + HIERARCHY, capsys)
+    assert code == 0, stderr
+    welded, _, props = read_surface(os.path.join(out, 'result.ply'))
+    back = np.stack([props['signal_0'], props['signal_1']], 1)
+    match = [int(np.flatnonzero((pos == p).all(1))[0]) for p in welded]
+    assert np.array_equal(back, signal[match])
+    # copies that disagree cannot be welded silently
+    stored[1] += 1.0
+    np.save(tmp_path / 'stored.npy', stored)
+    code, _, stderr = cli(['solve', soup, '--smooth', '1e-2', '--signal',
+                           str(tmp_path / 'stored.npy'), '--out', out,
+                           '--quiet'], capsys)
+    assert_user_error(code, stderr, 'solve', 'copies of welded vertices')
+
+
+def test_ascii_ply_with_properties(files, tmp_path, capsys):
+    paths, pos, face, _, heat = files
+    mesh = trimesh.Trimesh(pos, face, process=False,
+                           vertex_attributes={'heat': heat})
+    ascii_ply = str(tmp_path / 'ascii.ply')
+    with open(ascii_ply, 'wb') as f:
+        f.write(trimesh.exchange.ply.export_ply(mesh, encoding='ascii'))
+    assert b'format ascii' in open(ascii_ply, 'rb').read(100)
+    out = str(tmp_path / 'out')
+    code, _, stderr = cli(['solve', ascii_ply, '--poisson', '1', '--signal',
+                           'heat', '--out', out, '--quiet'], capsys)
+    assert code == 0, stderr
+    _, _, props = read_surface(os.path.join(out, 'result.ply'))
+    assert np.allclose(props['signal'], heat, atol=1e-6)  # float32 text
+    # a NaN in an ASCII PLY is named
+    text = open(ascii_ply).read().split('\n')
+    first = text.index('end_header') + 1
+    text[first] = 'nan ' + text[first].split(' ', 1)[1]
+    open(ascii_ply, 'w').write('\n'.join(text))
+    code, _, stderr = cli(['solve', ascii_ply, '--smooth', '1', '--out',
+                           out, '--quiet'], capsys)
+    assert_user_error(code, stderr, 'solve', 'ascii.ply', 'NaN')
+
+
+def test_a_mesh_of_three_triangles(tmp_path, capsys):
+    # the figure took a (3, 3) face array for the other layout
+    path = str(tmp_path / 'three.obj')
+    trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
+                    [[0, 1, 2], [0, 1, 3], [0, 2, 3]],
+                    process=False).export(path)
+    out = tmp_path / 'out'
+    code, _, stderr = cli(['solve', path, '--smooth', '1e-2', '--out', out,
+                           '--quiet'], capsys)
+    assert code == 0, stderr
+    assert {'result.ply', 'result.png', 'report.json'} <= set(
+        os.listdir(out))
+
+
+@pytest.mark.parametrize('text, message', [
+    ('v 0 0 0\n', 'only 1 vertex; a surface needs at least 3'),
+    ('v 0 0 0\nv 1 0 0\n', 'only 2 vertices'),
+])
+def test_tiny_meshes(tmp_path, capsys, text, message):
+    path = tmp_path / 'tiny.obj'
+    path.write_text(text)
+    code, _, stderr = cli(['solve', path, '--smooth', '1', '--out',
+                           tmp_path / 'out'], capsys)
+    assert_user_error(code, stderr, 'solve', 'tiny.obj', message)
+
+
+def test_a_signal_of_three_dimensions(files, tmp_path, capsys):
+    np.save(tmp_path / 'cube.npy', np.zeros((162, 2, 2)))
+    code, _, stderr = cli(['solve', files[0]['obj'], '--smooth', '1',
+                           '--signal', tmp_path / 'cube.npy', '--out',
+                           tmp_path / 'out'], capsys)
+    assert_user_error(code, stderr, 'solve', '(162, 2, 2)',
+                      'shape (162,) or (162, C)')
+
+
+def test_a_weight_far_too_large_names_the_option(files, tmp_path, capsys):
+    code, _, stderr = cli(['solve', files[0]['obj'], '--smooth', '1e300',
+                           '--out', tmp_path / 'out'], capsys)
+    assert_user_error(code, stderr, 'solve', '--smooth 1e+300 is too large',
+                      'use --smooth at most')
+    assert 'alpha' not in stderr and 'rescale' not in stderr
+
+
+def test_the_output_folder_never_holds_the_input(files, tmp_path, capsys):
+    out = tmp_path / 'out'
+    argv = ['solve', files[0]['obj'], '--smooth', '1e-2', '--quiet']
+    assert cli(argv + ['--out', out], capsys)[0] == 0
+    before = (out / 'result.ply').read_bytes()
+    code, _, stderr = cli(['solve', out / 'result.ply', '--smooth', '1e-2',
+                           '--out', out, '--overwrite'], capsys)
+    assert_user_error(code, stderr, 'solve', '--out', 'holds the input')
+    assert (out / 'result.ply').read_bytes() == before
+
+
+def test_a_failed_run_leaves_the_earlier_results(files, tmp_path, capsys,
+                                                 monkeypatch):
+    out = tmp_path / 'out'
+    argv = ['solve', files[0]['obj'], '--quiet', '--out', out]
+    assert cli(argv + ['--smooth', '1e-2'], capsys)[0] == 0
+    before = {name: (out / name).read_bytes() for name in os.listdir(out)}
+    import tg_intrinsic.io.figures as figures
+
+    def broken(*args, **kwargs):
+        raise ValueError('the figure failed')
+    monkeypatch.setattr(figures, 'draw_surface', broken)
+    code, _, stderr = cli(argv + ['--smooth', '1'], capsys)
+    assert_user_error(code, stderr, 'solve', 'the figure failed')
+    # the same files, none from the failed run, and no temporary folder
+    assert {name: (out / name).read_bytes()
+            for name in os.listdir(out)} == before
+    assert sorted(os.listdir(tmp_path)) == ['out']
+
+
+def test_a_rerun_replaces_the_results_whole(files, tmp_path, capsys):
+    out = tmp_path / 'out'
+    base = ['solve', files[0]['obj'], '--quiet', '--out', out]
+    assert cli(base + ['--smooth', '1e-2'], capsys)[0] == 0
+    assert cli(base + ['--smooth', '1e-1'], capsys)[0] == 0
+    with open(out / 'report.json') as f:
+        assert json.load(f)['parameters'] == {'alpha': 0.1}
+    assert sorted(os.listdir(tmp_path)) == ['out']
+
+
+def test_foreign_files_need_overwrite_and_are_kept(files, tmp_path,
+                                                  capsys):
+    out = tmp_path / 'mine'
+    out.mkdir()
+    (out / 'notes.txt').write_text('my notes')
+    argv = ['solve', files[0]['obj'], '--smooth', '1e-2', '--quiet',
+            '--out', out]
+    code, _, stderr = cli(argv, capsys)
+    assert_user_error(code, stderr, 'solve', 'notes.txt', '--overwrite')
+    assert os.listdir(out) == ['notes.txt']
+    assert cli(argv + ['--overwrite'], capsys)[0] == 0
+    assert (out / 'notes.txt').read_text() == 'my notes'
+    assert (out / 'result.ply').exists()
+    # the next run replaces its own files and keeps the notes
+    assert cli(argv, capsys)[0] == 0
+    assert (out / 'notes.txt').read_text() == 'my notes'

@@ -112,10 +112,13 @@ def test_every_format_gives_the_triangles_it_stores(tmp_path, ext):
     assert face.shape == F.shape
     # the same triangles, corner by corner (PLY and STL store float32)
     assert np.abs(pos[face] - V[F]).max() < 1e-6
-    if ext != 'stl':  # STL stores a triangle soup: 3 vertices per face
-        assert len(pos) == len(V) and np.array_equal(face, F)
+    # STL stores a triangle soup (3 vertices per face), welded on reading
+    # back into the mesh (vertex order aside)
+    assert len(pos) == len(V)
+    if ext != 'stl':
+        assert np.array_equal(face, F)
     else:
-        assert len(pos) == 3 * len(F)
+        assert len(mf.read_mesh(str(path), weld=False)[0]) == 3 * len(F)
 
 
 def test_polygons_become_triangle_fans(tmp_path):
@@ -308,9 +311,11 @@ def test_bad_signals_say_what_is_wrong(tmp_path):
     np.save(tmp_path / 'nan.npy', np.array([0, 1, np.nan, 2]))
     (tmp_path / 'bad.txt').write_text('1\n2\nthree\n4\n')
     cases = [
-        (str(tmp_path / 'five.npy'), r"has shape \(5,\) but the surface has "
+        (str(tmp_path / 'five.npy'), r"has 5 rows but the surface has "
                                      r"4 vertices; give one row per vertex"),
-        (str(tmp_path / 'cube.npy'), r"has shape \(4, 2, 2\)"),
+        (str(tmp_path / 'cube.npy'), r"has 3 dimensions \(4, 2, 2\); give "
+                                     r"one value, or one row of values, per "
+                                     r"vertex: shape \(4,\) or \(4, C\)"),
         (str(tmp_path / 'words.npy'), r"is not numeric \(<U1\)"),
         (str(tmp_path / 'nan.npy'), 'holds NaN or infinite values'),
         (str(tmp_path / 'bad.txt'), r"could not read the signal '.*bad\.txt'"),
@@ -326,3 +331,43 @@ def test_bad_signals_say_what_is_wrong(tmp_path):
     with pytest.raises(FileNotFoundError, match=r"signal file '.*gone\.npy' "
                        r"does not exist"):
         mf.read_signal(str(tmp_path / 'gone.npy'), 4)
+
+
+def test_ascii_and_binary_ply_give_the_same_properties(tmp_path):
+    V, F = icosphere()
+    quality = np.arange(len(V), dtype=np.float64)
+    mesh = trimesh.Trimesh(V, F, process=False,
+                           vertex_attributes={'quality': quality})
+    for encoding in ('ascii', 'binary'):
+        path = tmp_path / f'{encoding}.ply'
+        path.write_bytes(trimesh.exchange.ply.export_ply(
+            mesh, encoding=encoding))
+        pos, face, props = mf.read_surface(str(path))
+        assert np.array_equal(face, F) and np.abs(pos - V).max() < 1e-6
+        assert props['quality'].shape == (len(V),)
+        assert np.array_equal(props['quality'], quality)
+
+
+def test_welding_keeps_the_first_copy_and_gives_the_inverse(tmp_path):
+    V, F = icosphere()
+    soup = V[F].reshape(-1, 3)
+    path = tmp_path / 'soup.ply'
+    mf.write_ply(str(path), soup, np.arange(len(soup)).reshape(-1, 3),
+                 properties={'corner': np.arange(len(soup))})
+    with pytest.warns(UserWarning, match=r"welded 198 vertices .*240 -> 42"):
+        pos, face, props, inverse = mf.read_surface(str(path),
+                                                    return_inverse=True)
+    assert len(pos) == 42 and np.array_equal(pos[inverse], soup)
+    assert np.array_equal(pos[face], soup.reshape(-1, 3, 3))
+    # each welded vertex keeps the property of its first copy
+    first = [int(np.flatnonzero(inverse == k)[0]) for k in range(len(pos))]
+    assert np.array_equal(props['corner'], first)
+    # two corners of a triangle at one position: named, not welded away
+    soup[1] = soup[0]
+    mf.write_ply(str(path), soup, np.arange(len(soup)).reshape(-1, 3))
+    with pytest.raises(ValueError, match=r"soup.ply' has 1 triangle\(s\) "
+                                         r"with two corners at the same"):
+        mf.read_surface(str(path))
+    # a point cloud is kept as it is
+    mf.write_ply(str(path), np.concatenate([V, V]))
+    assert len(mf.read_surface(str(path))[0]) == 2 * len(V)

@@ -178,15 +178,25 @@ def test_extreme_scales_with_scaled_weights(scale):
         out = solve(scaled, weight * scale ** power) / scale ** out_power
         assert torch.allclose(out, reference, rtol=1e-6, atol=1e-9)
     # unscaled weights at 1e-8 make the mass term vanish under rounding:
-    # a clear error that names the scale and the remedy
+    # a clear error that names the scale, the usable bound and the remedy,
+    # and the bound it names works
     if scale < 1:
-        with pytest.raises(ValueError, match=r"total area .*'eta' depends "
-                                              r"on the scale"):
+        with pytest.raises(ValueError, match=r"'eta' = 1 is too small .*"
+                           r"total area .*rescale the surface") as error:
             poisson(scaled, 1.0)
-        suggestion = f'{1.0 / (area * scale ** 2):.3g}'
-        with pytest.raises(ValueError,
-                           match=re.escape(f'use about {suggestion} ')):
-            poisson(scaled, 1.0)
+        bound = float(re.search(r"at least (\S+?),", str(error.value))[1])
+        assert poisson(scaled, 2 * bound).isfinite().all()
+
+
+def test_a_weight_far_too_large_names_the_bound_not_a_rescaling():
+    # --smooth 1e300 on a unit-size surface: the weight is the mistake
+    data = small_data(channels=1)
+    with pytest.raises(ValueError, match=r"'alpha' = 1e\+300 is too large"
+                       r".*use 'alpha' at most") as error:
+        smooth(data, 1e300)
+    assert 'rescale' not in str(error.value)
+    bound = float(re.search(r"at most (\S+)$", str(error.value))[1])
+    assert smooth(data, bound / 2).isfinite().all()
 
 
 def test_pcg_smoothing_matches_a_direct_solve():

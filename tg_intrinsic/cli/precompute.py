@@ -14,6 +14,7 @@ that fail are listed at the end and in OUTPUT/failures.json (exit code 2);
 the others are still written."""
 import json
 import os
+import shutil
 import textwrap
 import time
 import traceback
@@ -217,10 +218,26 @@ def load_surface(path: str, kind: str, dtype: str):
     return data
 
 
+def _check_neighbours(data, kind: str, settings: Dict, source: str):
+    """A neighbour count above the points of a file, named by its option
+    (the transforms only know their own argument names)."""
+    n = data.num_nodes
+    options = {'mls': [('--k', 'k')] + ([] if 'normal' in data or
+                                         'face' in data
+                                         else [('--normal-k', 'normal_k')]),
+               'gravo': [] if 'face' in data else [('--k', 'k')]}
+    for option, name in options.get(kind, []):
+        if settings[name] > n:
+            raise ValueError(f"'{source}' has {n} points, fewer than "
+                             f"{option} {settings[name]}; lower {option} to "
+                             f"at most {n}")
+
+
 def precompute_file(kind: str, settings: Dict, source: str, target: str):
     """Precomputes one file and saves the result atomically."""
     from tg_intrinsic.utils import atomic_torch_save
     data = load_surface(source, kind, settings['dtype'])
+    _check_neighbours(data, kind, settings, source)
     data = transform_of(kind, settings)(data)
     atomic_torch_save(data, target)
 
@@ -244,13 +261,22 @@ def _work(task) -> Tuple[str, Optional[str], Optional[str]]:
 
 def find_inputs(folder: str, skip: Optional[str] = None) -> List[str]:
     """Every OBJ/OFF/PLY/STL file under ``folder``, recursively, sorted
-    (hidden files and folders and the folder ``skip`` left out)."""
+    (hidden files and folders and the folder ``skip`` left out). Linked
+    folders are followed, each real folder once (a link to a parent
+    would loop)."""
     from tg_intrinsic.io.mesh import MESH_EXTENSIONS
     skip = os.path.realpath(skip) if skip else None
-    found = []
-    for root, dirs, files in os.walk(folder):
+    found, seen = [], {os.path.realpath(folder)}
+
+    def new(path):
+        real = os.path.realpath(path)
+        if real == skip or real in seen:
+            return False
+        seen.add(real)
+        return True
+    for root, dirs, files in os.walk(folder, followlinks=True):
         dirs[:] = sorted(d for d in dirs if not d.startswith('.') and
-                         os.path.realpath(os.path.join(root, d)) != skip)
+                         new(os.path.join(root, d)))
         for name in files:
             if not name.startswith('.') and \
                     os.path.splitext(name)[1].lower() in MESH_EXTENSIONS:
@@ -297,39 +323,118 @@ def plan(input_path: str, output: str) -> Tuple[List[Tuple[str, str]],
     return pairs, True
 
 
-def check_manifest(output: str, manifest: Dict, overwrite: bool,
-                   targets: List[str]):
-    """Stops when ``output`` was made with other settings (unless
-    ``overwrite``), then records ``manifest`` there."""
+def _read_manifest(path: str) -> Optional[Dict]:
+    """The manifest at ``path``, :obj:`None` when missing; a
+    :class:`UsageError` when unreadable."""
+    if not os.path.exists(path):
+        return None
+    try:
+        with open(path) as f:
+            old = json.load(f)
+        old['kind'], old['settings']  # noqa: B018 - both must be there
+        return old
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise UsageError(f"cannot read '{path}' ({one_line(error)}); "
+                         f"delete it or rerun with --overwrite") from None
+
+
+def _changes(old: Dict, manifest: Dict) -> List[str]:
+    changes = [f"kind {old['kind']} -> {manifest['kind']}"] \
+        if old['kind'] != manifest['kind'] else []
+    return changes + [f"{key} {old['settings'].get(key)!r} -> {value!r}"
+                      for key, value in manifest['settings'].items()
+                      if old['settings'].get(key) != value]
+
+
+def _foreign_files(output: str, owned_results: bool) -> List[str]:
+    """Files under ``output`` that precompute did not write: all but its
+    manifest, failure list and (when a manifest owns them) .pt files."""
+    from tg_intrinsic.io.results import RECORD
+    found = []
+    for root, dirs, files in os.walk(output):
+        dirs.sort()
+        for name in sorted(files):
+            rel = os.path.relpath(os.path.join(root, name), output)
+            if rel in (MANIFEST, FAILURES, RECORD) or (
+                    owned_results and name.endswith('.pt')):
+                continue
+            found.append(rel)
+    return found
+
+
+def choose_folder(output: str, manifest: Dict, overwrite: bool,
+                  targets: List[str]) -> str:
+    """Where this run writes, after checking ``output``: ``output`` itself
+    for a new folder or a resumed run, else (``overwrite`` over earlier
+    results) a staging folder beside it whose files replace the earlier
+    ones only when every file is done (:func:`commit_staging`), so a
+    failed run never mixes settings. Stops on other settings, results of
+    unknown settings or files precompute did not write, unless
+    ``overwrite``. Records ``manifest`` in the folder chosen."""
     from tg_intrinsic.utils import atomic_write_json
-    path = os.path.join(output, MANIFEST)
-    if os.path.exists(path) and not overwrite:
-        try:
-            with open(path) as f:
-                old = json.load(f)
-            old_kind, old_settings = old['kind'], old['settings']
-        except (OSError, ValueError, KeyError, TypeError) as error:
-            raise UsageError(f"cannot read '{path}' ({one_line(error)}); "
-                             f"delete it or rerun with --overwrite") \
-                from None
-        if old_kind != manifest['kind'] or old_settings != \
-                manifest['settings']:
-            changes = [f"kind {old_kind} -> {manifest['kind']}"] \
-                if old_kind != manifest['kind'] else []
-            changes += [f"{key} {old_settings.get(key)!r} -> {value!r}"
-                        for key, value in manifest['settings'].items()
-                        if old_settings.get(key) != value]
-            raise UsageError(f"'{output}' was made with other settings "
-                             f"({', '.join(changes)}); rerun with --overwrite "
-                             f"to recompute every file, or give another "
-                             f"OUTPUT")
-    elif not overwrite and any(os.path.exists(t) for t in targets):
-        raise UsageError(f"'{output}' holds results but no {MANIFEST}, so "
-                         f"their settings are unknown; rerun with "
-                         f"--overwrite to recompute them, or give another "
-                         f"OUTPUT")
-    os.makedirs(output, exist_ok=True)
-    atomic_write_json(path, manifest)
+    old = _read_manifest(os.path.join(output, MANIFEST)) \
+        if not overwrite else None
+    if old is not None and _changes(old, manifest):
+        raise UsageError(f"'{output}' was made with other settings "
+                         f"({', '.join(_changes(old, manifest))}); rerun "
+                         f"with --overwrite to recompute every file, or "
+                         f"give another OUTPUT")
+    owned = os.path.exists(os.path.join(output, MANIFEST))
+    foreign = _foreign_files(output, owned) if os.path.isdir(output) else []
+    if foreign and not overwrite:
+        unknown = [name for name in foreign if name.endswith('.pt')]
+        if unknown:
+            raise UsageError(f"'{output}' holds results ({unknown[0]}, ...) "
+                             f"but no {MANIFEST}, so their settings are "
+                             f"unknown; rerun with --overwrite to recompute "
+                             f"them, or give another OUTPUT")
+        raise UsageError(f"OUTPUT '{output}' holds files precompute did not "
+                         f"write ({', '.join(foreign[:3])}"
+                         f"{', ...' if len(foreign) > 3 else ''}); give a "
+                         f"new or empty folder, or --overwrite to write "
+                         f"there anyway (those files are kept)")
+    earlier = owned or any(os.path.exists(t) for t in targets)
+    folder = staging_folder(output) if overwrite and earlier else output
+    if folder != output:
+        kept = _read_manifest(os.path.join(folder, MANIFEST)) \
+            if os.path.isdir(folder) else None
+        if kept is None or _changes(kept, manifest):
+            shutil.rmtree(folder, ignore_errors=True)  # other settings
+    os.makedirs(folder, exist_ok=True)
+    atomic_write_json(os.path.join(folder, MANIFEST), manifest)
+    return folder
+
+
+def staging_folder(output: str) -> str:
+    """The folder beside ``output`` where ``--overwrite`` computes."""
+    parent, name = os.path.split(os.path.abspath(output))
+    return os.path.join(parent, f'.{name}.overwrite')
+
+
+def commit_staging(staging: str, output: str, targets: List[str]):
+    """Replaces the earlier results in ``output`` by those in
+    ``staging``: the old manifest goes first (so no moment claims
+    settings the files do not hold), then every result, then the new
+    manifest; earlier results of files no longer in INPUT are removed."""
+    old_manifest = os.path.join(output, MANIFEST)
+    owned = os.path.exists(old_manifest)
+    if owned:
+        os.remove(old_manifest)
+    keep = {os.path.abspath(t) for t in targets}
+    if owned:
+        for root, _, files in os.walk(output):
+            for name in files:
+                path = os.path.abspath(os.path.join(root, name))
+                if name.endswith('.pt') and path not in keep:
+                    os.remove(path)
+    for target in targets:
+        rel = os.path.relpath(target, output)
+        os.makedirs(os.path.dirname(os.path.abspath(target)), exist_ok=True)
+        os.replace(os.path.join(staging, rel), target)
+    if os.path.exists(os.path.join(output, FAILURES)):
+        os.remove(os.path.join(output, FAILURES))  # the earlier run's
+    os.replace(os.path.join(staging, MANIFEST), old_manifest)
+    shutil.rmtree(staging, ignore_errors=True)
 
 
 def _done(source: str, target: str) -> bool:
@@ -375,6 +480,7 @@ def run(args):
                          f"about 1/RATIO of the points), got {args.ratio:g}")
     pairs, folder = plan(args.input, args.output)
     settings = settings_of(args)
+    write_to = args.output
     if folder:
         manifest = {'kind': args.kind, 'settings': settings,
                     'format': 'torch.save of a torch_geometric Data '
@@ -382,22 +488,31 @@ def run(args):
                     'torch.load(path, weights_only=False)',
                     'input': os.path.abspath(args.input),
                     'tg_intrinsic': tg_intrinsic.__version__}
-        check_manifest(args.output, manifest, args.overwrite,
-                       [target for _, target in pairs])
-    todo = [(s, t) for s, t in pairs
-            if not folder or args.overwrite or not _done(s, t)]
+        write_to = choose_folder(args.output, manifest, args.overwrite,
+                                 [target for _, target in pairs])
+    elif os.path.exists(args.output) and not args.overwrite:
+        raise UsageError(f"OUTPUT '{args.output}' exists; rerun with "
+                         f"--overwrite to replace it, or give another name")
+    staged = write_to != args.output
+
+    def where(target):
+        return os.path.join(write_to, os.path.relpath(target, args.output)) \
+            if staged else target
+    todo = [(s, t) for s, t in pairs if not folder or not _done(s, where(t))
+            or (args.overwrite and not staged)]
     for _, target in todo:
-        os.makedirs(os.path.dirname(os.path.abspath(target)), exist_ok=True)
-    tasks = [(args.kind, settings, source, target) for source, target in todo]
+        os.makedirs(os.path.dirname(os.path.abspath(where(target))),
+                    exist_ok=True)
+    tasks = [(args.kind, settings, source, where(target))
+             for source, target in todo]
     failures = {}
     for source, reason, trace in [] if not tasks else run_tasks(
             tasks, args.workers, args.quiet, args.debug,
             f'precompute {args.kind}'):
         if reason is not None:
             failures[source] = (reason, trace)
-    where = args.output if folder else os.path.dirname(
-        os.path.abspath(args.output))
-    failures_path = os.path.join(where, FAILURES)
+    failures_path = os.path.join(write_to if folder else os.path.dirname(
+        os.path.abspath(args.output)), FAILURES)
     seconds = time.perf_counter() - start
     if failures:
         names = [(source, os.path.relpath(source, args.input)
@@ -412,7 +527,14 @@ def run(args):
         listed = '; '.join(f"{name}: {failures[source][0]}"
                            for source, name in names)
         traces = any(trace for _, trace in failures.values())
-        if folder:
+        if staged:
+            note = (f" (listed in {failures_path}"
+                    + (', with the tracebacks' if traces else '')
+                    + f"; '{args.output}' still holds the earlier results, "
+                    f"untouched: the new ones wait in {write_to} until every "
+                    f"file is done; rerun this command to retry the failed "
+                    f"ones)")
+        elif folder:
             note = (f" (listed in {failures_path}"
                     + (', with the tracebacks' if traces else '')
                     + '; the other files are done, rerun to retry the '
@@ -424,6 +546,9 @@ def run(args):
                          f"{listed}{note}")
     if folder and os.path.exists(failures_path):
         os.remove(failures_path)  # an earlier run's, now all done
+    if staged:
+        commit_staging(write_to, args.output,
+                       [target for _, target in pairs])
     if not args.quiet:
         skipped = len(pairs) - len(todo)
         if not todo:

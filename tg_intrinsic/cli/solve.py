@@ -15,8 +15,8 @@ every cycle and the timings)."""
 import os
 import time
 
-from .common import (UsageError, default_of, stage, output_folder,
-                     positive_float, positive_int)
+from .common import (UsageError, default_of, stage, positive_float,
+                     positive_int)
 
 HELP = ('smooth a signal, solve a screened Poisson problem or flow a mesh '
         'with Gravo MG')
@@ -75,6 +75,9 @@ def add_arguments(parser):
                         '--smooth: the vertex positions)')
     parser.add_argument('--out', default=None,
                         help='output folder (default: runs/solve_<MESH name>)')
+    parser.add_argument('--overwrite', action='store_true',
+                        help='write into --out even when it holds files '
+                        'this command did not write (they are kept)')
     parser.add_argument('--tol', type=positive_float,
                         default=default_of(smooth, 'tol'),
                         help='relative residual |M y - A x| / |M y| to reach '
@@ -129,6 +132,8 @@ def run(args):
 
     from tg_intrinsic.io import read_signal, read_surface, write_ply
     from tg_intrinsic.io.figures import draw_surface
+    from tg_intrinsic.io.mesh import SIGNAL_EXTENSIONS
+    from tg_intrinsic.io.results import claim_folder, result_folder
     from tg_intrinsic.solvers import (GravoMG, conformal_flow, poisson,
                                       smooth)
     from tg_intrinsic.solvers.systems import (combined_info,
@@ -151,19 +156,29 @@ def run(args):
         raise UsageError(f"--ratio must be greater than 1 (each level keeps "
                          f"about 1/RATIO of the points), got {args.ratio:g}")
     quiet = args.quiet
+    out = args.out or os.path.join('runs', 'solve_' + os.path.splitext(
+        os.path.basename(args.mesh))[0])
+    inputs = [args.mesh]
+    if args.signal is not None:
+        signal_file = args.signal.rpartition(':')[0] \
+            if args.signal.rpartition(':')[0].lower().endswith('.ply') \
+            else args.signal
+        if os.path.splitext(signal_file)[1].lower() in \
+                SIGNAL_EXTENSIONS + ('.ply',):
+            inputs.append(signal_file)
+    # checked before the work, again when the results are put in place
+    claim_folder(out, 'solve', args.overwrite, inputs)
     times = {}
     start = time.perf_counter()
     with stage(f"reading {args.mesh}", quiet, times, 'read'):
-        pos, face, properties = read_surface(args.mesh)
+        pos, face, properties, inverse = read_surface(args.mesh,
+                                                      return_inverse=True)
         n = len(pos)
         y = pos.copy() if args.signal is None else \
-            read_signal(args.signal, n, properties)
+            read_signal(args.signal, n, properties, inverse)
     if args.conformal_flow is not None and face is None:
         raise UsageError(f"--conformal-flow needs a triangle mesh, but "
                          f"{args.mesh} is a point cloud (no faces)")
-    out = output_folder(args.out or os.path.join(
-        'runs', 'solve_' + os.path.splitext(os.path.basename(
-            args.mesh))[0]))
     name, equation, parameters, title = _problem(args)
     data = Data(pos=torch.from_numpy(pos))
     if face is not None:
@@ -191,17 +206,21 @@ def run(args):
             'method')
         options = dict(solver=solver, tol=args.tol, cycle=args.cycle,
                        max_iter=args.max_cycles, method=method)
-        if args.conformal_flow is not None:
-            steps = []
-            x = conformal_flow(data, args.conformal_flow, args.steps,
-                               callback=lambda t, i: steps.append(i),
-                               **options)[-1]
-            solver.info = combined_info(steps)
-        elif args.poisson is not None:
-            x = poisson(data, args.poisson, y=torch.from_numpy(y), **options)
-        else:
-            x = smooth(data, args.smooth, beta=args.bilaplacian or 0.0,
-                       y=torch.from_numpy(y), **options)
+        try:
+            if args.conformal_flow is not None:
+                steps = []
+                x = conformal_flow(data, args.conformal_flow, args.steps,
+                                   callback=lambda t, i: steps.append(i),
+                                   **options)[-1]
+                solver.info = combined_info(steps)
+            elif args.poisson is not None:
+                x = poisson(data, args.poisson, y=torch.from_numpy(y),
+                            **options)
+            else:
+                x = smooth(data, args.smooth, beta=args.bilaplacian or 0.0,
+                           y=torch.from_numpy(y), **options)
+        except ValueError as error:
+            raise UsageError(_with_option_names(str(error))) from error
         x = x.numpy()
     info = solver.info
     times['setup'] = info.setup_time
@@ -213,48 +232,66 @@ def run(args):
     fairing = args.signal is None
     ply_path = os.path.join(out, 'result.ply')
     png_path = os.path.join(out, 'result.png')
-    with stage('writing result.ply and result.png', quiet, times, 'write'):
-        write_ply(ply_path, x if fairing else pos, face,
-                  properties={'signal': y, 'result': x})
-        values, label, what = _drawn_values(x, y, fairing, args.signal)
-        draw_surface(png_path, x if fairing else pos, face, values=values,
-                     title=f'{title}\n{what}', label=label)
-    times['total'] = time.perf_counter() - start
-
-    report = {
-        'input': os.path.abspath(args.mesh),
-        'vertices': n,
-        'faces': int(len(face)) if face is not None else 'point cloud',
-        'laplacian': laplacian,
-        'problem': name,
-        'equation': equation,
-        'parameters': parameters,
-        'signal': args.signal or 'vertex positions',
-        'channels': channels,
-        # named as write_ply names them
-        'ply_properties': ['signal', 'result'] if channels == 1 else
-        [f'{key}_{k}' for key in ('signal', 'result')
-         for k in range(channels)],
-        'hierarchy': {'ratio': args.ratio, 'lower_bound': args.lower_bound,
-                      'graph': 'mesh edges' if face is not None else
-                      f'k-nearest neighbours (k = {coarsen.k})',
-                      'level_sizes': sizes},
-        'solver': {'method': method, 'cycle': args.cycle, 'tol': args.tol,
-                   'max_cycles': args.max_cycles,
-                   'cycles': info.iterations,
-                   'final_relative_residual': info.residuals[-1]
-                   if info.residuals else None,
-                   'residuals': list(info.residuals),
-                   'converged': bool(info.converged),
-                   'direct': info.direct},
-        'seconds': {key: round(float(value), 6)
-                    for key, value in times.items()},
-        'outputs': {'ply': ply_path, 'png': png_path},
-    }
-    atomic_write_json(os.path.join(out, 'report.json'), report)
+    with result_folder(out, 'solve', args.overwrite, inputs) as staging:
+        with stage('writing result.ply and result.png', quiet, times,
+                   'write'):
+            write_ply(os.path.join(staging, 'result.ply'),
+                      x if fairing else pos, face,
+                      properties={'signal': y, 'result': x})
+            values, label, what = _drawn_values(x, y, fairing, args.signal)
+            draw_surface(os.path.join(staging, 'result.png'),
+                         x if fairing else pos,
+                         None if face is None else face.T, values=values,
+                         title=f'{title}\n{what}', label=label)
+        times['total'] = time.perf_counter() - start
+        report = {
+            'input': os.path.abspath(args.mesh),
+            'vertices': n,
+            'faces': int(len(face)) if face is not None else 'point cloud',
+            'laplacian': laplacian,
+            'problem': name,
+            'equation': equation,
+            'parameters': parameters,
+            'signal': args.signal or 'vertex positions',
+            'channels': channels,
+            # named as write_ply names them
+            'ply_properties': ['signal', 'result'] if channels == 1 else
+            [f'{key}_{k}' for key in ('signal', 'result')
+             for k in range(channels)],
+            'hierarchy': {'ratio': args.ratio,
+                          'lower_bound': args.lower_bound,
+                          'graph': 'mesh edges' if face is not None else
+                          f'k-nearest neighbours (k = {coarsen.k})',
+                          'level_sizes': sizes},
+            'solver': {'method': method, 'cycle': args.cycle,
+                       'tol': args.tol, 'max_cycles': args.max_cycles,
+                       'cycles': info.iterations,
+                       'final_relative_residual': info.residuals[-1]
+                       if info.residuals else None,
+                       'residuals': list(info.residuals),
+                       'converged': bool(info.converged),
+                       'direct': info.direct},
+            'seconds': {key: round(float(value), 6)
+                        for key, value in times.items()},
+            'outputs': {'ply': ply_path, 'png': png_path},
+        }
+        atomic_write_json(os.path.join(staging, 'report.json'), report)
     if not quiet:
         _summary(report, args.mesh, out)
     return 0
+
+
+# the library's names of the weights, and the options that set them
+OPTION_OF = {"'alpha'": '--smooth', "'beta'": '--bilaplacian',
+             "'eta'": '--poisson', "'step'": '--conformal-flow'}
+
+
+def _with_option_names(message: str) -> str:
+    """A library message in the command line's words."""
+    for name, option in OPTION_OF.items():
+        message = message.replace(f'{name} = ', f'{option} ').replace(
+            name, option)
+    return message
 
 
 def _drawn_values(x, y, fairing: bool, signal):

@@ -268,7 +268,8 @@ class MeshFolder(FolderDataset):
 
     def read(self):
         if self.task == 'classification':
-            data_list = [self._data(*self._weld(path, *read_mesh(path))[:2],
+            data_list = [self._data(*self._weld(path, *read_mesh(
+                path, weld=False))[:2],
                                     y=torch.tensor([c]))
                          for path, c in self.progress(self._items, 'mesh')]
             return data_list, {'classes': self._classes,
@@ -307,7 +308,8 @@ class MeshFolder(FolderDataset):
     def _read_labelled(self, path: str, hard: Optional[str],
                        soft: Optional[str]):
         """The labelled mesh and how many classes its label files use."""
-        pos, face = read_mesh(path)
+        # welded below, after the labels of the stored edges are matched
+        pos, face = read_mesh(path, weld=False)
         mesh = f"'{path}'"
         labels, soft_rows, used = self._read_label_files(hard, soft)
         edges = None

@@ -121,7 +121,7 @@ def render_surface(pos, face=None, values=None, colors=None, normal=None,
                    views: Sequence[str] = ('front-left', 'front-right'),
                    size: int = 360):
     """Shaded RGB images ``(V, size, size, 3)`` in [0, 1] (white
-    background) of a mesh (``face`` :math:`(3, F)` or :math:`(F, 3)`) or a
+    background) of a mesh (``face`` :math:`(3, F)`, PyG's layout) or a
     point cloud (``face`` None) coloured by per-vertex ``values``
     :math:`(N)` through ``cmap``, or by ``colors`` :math:`(N, 3)` in
     [0, 1], or grey."""
@@ -141,9 +141,11 @@ def render_surface(pos, face=None, values=None, colors=None, normal=None,
     else:
         rgb = np.full((n, 3), 0.75)
     if face is not None:
+        # one layout: a mesh of 3 triangles would make a guess ambiguous
         face = torch.as_tensor(np.asarray(face, dtype=np.int64))
-        if face.size(0) != 3:
-            face = face.t()
+        if face.dim() != 2 or face.size(0) != 3:
+            raise ValueError(f"face must have shape (3, F), PyG's layout, "
+                             f"got {tuple(face.shape)}")
         face = face.contiguous()
         from tg_intrinsic.geometry import vertex_normals
         normal = vertex_normals(pos, face).numpy()  # smooth shading

@@ -16,38 +16,47 @@ SIGNAL_EXTENSIONS = ('.npy', '.txt', '.csv')
 _GEOMETRY_PROPERTIES = ('x', 'y', 'z')
 
 
-def read_mesh(path: str) -> Tuple[np.ndarray, np.ndarray]:
-    """Reads a triangle mesh: ``(pos [N, 3] float64, face [F, 3] int64)``.
-    Vertices are neither merged nor reordered; polygons become triangle
-    fans.
+def read_mesh(path: str, weld: bool = True
+              ) -> Tuple[np.ndarray, np.ndarray]:
+    """Reads a triangle mesh: ``(pos [N, 3] float64, face [F, 3] int64)``,
+    by the policy of :func:`read_surface` (vertices at the same position
+    welded unless ``weld=False``; polygons become triangle fans).
 
     Raises a :class:`ValueError` that names the file if it cannot be read,
-    holds no triangles, has NaN or infinite coordinates, faces that index
-    past the vertex count, or faces that repeat a vertex (see
-    :func:`read_surface`).
+    holds no triangles, or breaks the rules of :func:`read_surface`.
     """
-    pos, face, _ = read_surface(path)
+    pos, face, _ = read_surface(path, weld=weld)
     if face is None:
         raise ValueError(f"'{path}' holds a point cloud, not a triangle mesh")
     return pos, face
 
 
-def read_surface(path: str) -> Tuple[np.ndarray, Optional[np.ndarray],
-                                     Dict[str, np.ndarray]]:
-    """Reads a mesh or a point cloud (OBJ, OFF, PLY, STL): ``(pos [N, 3]
-    float64, face [F, 3] int64 or None for a point cloud, properties)``,
-    where ``properties`` holds the PLY vertex properties other than
-    ``x, y, z`` by name (``nx``, ``red``, ``quality``, ...; empty for other
-    formats).
+def read_surface(path: str, weld: bool = True, return_inverse: bool = False
+                 ) -> Tuple[np.ndarray, Optional[np.ndarray],
+                            Dict[str, np.ndarray]]:
+    """Reads a mesh or a point cloud (OBJ, OFF, PLY binary or ASCII, STL):
+    ``(pos [N, 3] float64, face [F, 3] int64 or None for a point cloud,
+    properties)``, where ``properties`` holds the PLY vertex properties
+    other than ``x, y, z`` by name (``nx``, ``red``, ``quality``, ...;
+    empty for other formats).
 
-    Raises a :class:`ValueError` that names the file and the problem: the
-    file cannot be read, has no vertices, NaN or infinite coordinates,
-    faces that index outside the vertices, or faces that repeat a vertex
-    (e.g. the OBJ line ``f 1 1 2``). Such a degenerate face is an error,
-    like an index out of range, and not dropped: the message names the
-    first one (its triangle index and, for OBJ and OFF files, its line)
-    and says how to remove them. The geometry code rejects such triangles
-    too, but could not name the file.
+    Every command reads surfaces by this one policy:
+
+    - **welding**: the vertices of a mesh at exactly the same position are
+      merged (STL files and many OBJ exporters store every triangle's
+      corners separately), with a warning that says how many; each
+      welded vertex keeps the properties of its first copy. Point clouds
+      are kept as they are. ``weld=False`` reads the vertices as stored.
+    - **refused**, with a :class:`ValueError` that names the file and the
+      problem: a file that cannot be read, fewer than 3 vertices, NaN or
+      infinite coordinates, faces that index outside the vertices, and
+      faces that repeat a vertex (e.g. the OBJ line ``f 1 1 2``, or a
+      triangle whose corners coincide, found by welding). Such a face has
+      no area; the message names the first one (its triangle index and,
+      for OBJ and OFF files, its line) and says how to remove it.
+
+    With ``return_inverse=True`` a fourth value gives, for every vertex
+    as stored, its index after welding (``[N_stored]``).
     """
     path = os.fspath(path)
     if not osp.exists(path):
@@ -96,7 +105,54 @@ def read_surface(path: str) -> Tuple[np.ndarray, Optional[np.ndarray],
                          f"{len(pos) - 1}] (the vertex count is {len(pos)})")
     if face is not None:
         _check_repeated_corners(path, ext, face)
+    inverse = np.arange(len(pos))
+    if face is not None and weld:
+        pos, face, properties, inverse = _weld(path, pos, face, properties)
+    if len(pos) < 3:
+        raise ValueError(f"'{path}' has only {len(pos)} "
+                         f"{'vertex' if len(pos) == 1 else 'vertices'}"
+                         f"{' after welding' if len(inverse) > len(pos) else ''}"
+                         f"; a surface needs at least 3")
+    if return_inverse:
+        return pos, face, properties, inverse
     return pos, face, properties
+
+
+def _weld(path: str, pos: np.ndarray, face: np.ndarray,
+          properties: Dict[str, np.ndarray]):
+    """Merges the vertices at the same position (warning how many);
+    ``(pos, face, properties, inverse)``."""
+    import warnings
+
+    import torch
+
+    from tg_intrinsic.geometry import weld_vertices
+    welded, new_face, inverse = weld_vertices(
+        torch.from_numpy(pos), torch.from_numpy(face).t())
+    welded, new_face = welded.numpy(), new_face.t().numpy()
+    inverse = inverse.numpy()
+    merged = len(pos) - len(welded)
+    if not merged:
+        return pos, face, properties, inverse
+    repeated = (new_face[:, 0] == new_face[:, 1]) | \
+        (new_face[:, 1] == new_face[:, 2]) | (new_face[:, 0] == new_face[:, 2])
+    if repeated.any():
+        first = int(np.flatnonzero(repeated)[0])
+        raise ValueError(
+            f"'{path}' has {int(repeated.sum())} triangle(s) with two "
+            f"corners at the same position (first: triangle {first}, "
+            f"vertices {face[first].tolist()} counted from 0); such a face "
+            f"has no area. Delete these faces, e.g. with trimesh: m = "
+            f"trimesh.load(path); m.update_faces(m.nondegenerate_faces()); "
+            f"m.export(path)")
+    first_copy = np.full(len(welded), len(pos), dtype=np.int64)
+    np.minimum.at(first_copy, inverse, np.arange(len(pos)))
+    warnings.warn(f"'{path}': welded {merged} vertices at the same position "
+                  f"as another ({len(pos)} -> {len(welded)}), which "
+                  f"connects its triangles into one surface", stacklevel=3)
+    properties = {name: values[first_copy]
+                  for name, values in properties.items()}
+    return welded, new_face, properties, inverse
 
 
 def _check_repeated_corners(path: str, ext: str, face: np.ndarray):
@@ -160,20 +216,30 @@ def _first_repeating_face_line(path: str, ext: str
 
 def _ply_vertex_properties(loaded, num_vertices: int
                            ) -> Dict[str, np.ndarray]:
+    """The PLY vertex properties other than x y z, by name: trimesh keeps
+    them as a structured array (binary PLY) or a dict of columns (ASCII
+    PLY)."""
     raw = getattr(loaded, 'metadata', {}).get('_ply_raw', {})
     data = raw.get('vertex', {}).get('data') if isinstance(raw, dict) \
         else None
+    if isinstance(data, dict):
+        columns = dict(data)
+    elif data is not None and data.dtype.names is not None:
+        columns = {name: data[name] for name in data.dtype.names}
+    else:
+        return {}
     out: Dict[str, np.ndarray] = {}
-    if data is None or data.dtype.names is None or len(data) != \
-            num_vertices:
-        return out
-    for name in data.dtype.names:
+    for name, column in columns.items():
         if name in _GEOMETRY_PROPERTIES:
             continue
-        column = data[name]
-        if column.dtype.names:  # a list property: (count, values)
+        if getattr(column.dtype, 'names', None):  # a list: (count, values)
             column = column[column.dtype.names[-1]]
-        out[name] = np.asarray(column)
+        column = np.asarray(column)
+        if column.ndim == 2 and column.shape[1] == 1:
+            column = column[:, 0]
+        if len(column) != num_vertices:
+            continue
+        out[name] = column
     return out
 
 
@@ -230,13 +296,17 @@ def read_off(path: str) -> Tuple[np.ndarray, np.ndarray]:
 
 
 def read_signal(source: str, num_vertices: int,
-                properties: Optional[Dict[str, np.ndarray]] = None
-                ) -> np.ndarray:
+                properties: Optional[Dict[str, np.ndarray]] = None,
+                inverse: Optional[np.ndarray] = None) -> np.ndarray:
     """A per-vertex signal, ``(N)`` or ``(N, C)`` float64, from ``source``:
     a ``.npy`` file, a ``.txt`` / ``.csv`` file with one row per vertex,
     ``FILE.ply:NAME`` (vertex property ``NAME`` of a PLY file) or ``NAME``
     alone, a vertex property of the input (``properties``, from
     :func:`read_surface`).
+
+    ``inverse`` (from :func:`read_surface` with ``return_inverse=True``)
+    also accepts a signal with one row per vertex as stored in the file,
+    before welding: the copies of a welded vertex must hold the same row.
 
     Raises a :class:`ValueError` when the source is missing, unreadable,
     not finite, or has another number of rows than ``num_vertices``.
@@ -273,13 +343,41 @@ def read_signal(source: str, num_vertices: int,
         raise ValueError(f"signal {source!r} is not numeric "
                          f"({values.dtype})")
     values = values.astype(np.float64)
-    if values.ndim not in (1, 2) or values.shape[0] != num_vertices:
-        raise ValueError(f"signal {source!r} has shape {values.shape} but "
-                         f"the surface has {num_vertices} vertices; give one "
-                         f"row per vertex")
+    if values.ndim not in (1, 2):
+        raise ValueError(f"signal {source!r} has {values.ndim} dimensions "
+                         f"{values.shape}; give one value, or one row of "
+                         f"values, per vertex: shape ({num_vertices},) or "
+                         f"({num_vertices}, C)")
+    if inverse is not None and len(inverse) != num_vertices and \
+            values.shape[0] == len(inverse):
+        values = _follow_weld(source, values, inverse, num_vertices)
+    if values.shape[0] != num_vertices:
+        stored = '' if inverse is None or len(inverse) == num_vertices \
+            else f" ({len(inverse)} as stored in the file, before welding)"
+        raise ValueError(f"signal {source!r} has {values.shape[0]} rows but "
+                         f"the surface has {num_vertices} vertices{stored}; "
+                         f"give one row per vertex")
     if not np.isfinite(values).all():
         raise ValueError(f"signal {source!r} holds NaN or infinite values")
     return values
+
+
+def _follow_weld(source: str, values: np.ndarray, inverse: np.ndarray,
+                 num_vertices: int) -> np.ndarray:
+    """One row per welded vertex from one row per stored vertex; the copies
+    of a vertex must agree."""
+    first_copy = np.full(num_vertices, len(inverse), dtype=np.int64)
+    np.minimum.at(first_copy, inverse, np.arange(len(inverse)))
+    welded = values[first_copy]
+    differ = np.flatnonzero((welded[inverse] != values).reshape(
+        len(values), -1).any(1))
+    if differ.size:
+        raise ValueError(f"signal {source!r} has one row per vertex as "
+                         f"stored, but {differ.size} copies of welded "
+                         f"vertices hold other values than their first "
+                         f"copy (first: row {int(differ[0])}); give one row "
+                         f"per welded vertex")
+    return welded
 
 
 def write_ply(path: str, pos: np.ndarray, face: Optional[np.ndarray] = None,

@@ -98,20 +98,27 @@ def _solve(data, matrix, mass, y, solver, tol, ratio, lower_bound, cycle,
 RESOLVABLE_MASS = 1e-12
 
 
-def _check_scale(S: sp.csr_matrix, m: np.ndarray, mass_weight: float,
-                 stiffness_weight: float, parameter: str, suggestion: float):
-    """The mass term must stand out of the stiffness term's rounding. Both
-    weights are in absolute units, so at an extreme scale a weight meant
-    for a unit-area surface makes the system singular in float64."""
-    share = mass_weight * m.max() / (stiffness_weight * abs(S).max())
-    if share < RESOLVABLE_MASS:
-        raise ValueError(
-            f"at this scale (total area {m.sum():.3g}) the mass term is "
-            f"{share:.1e} of the stiffness term, below float64 rounding, so "
-            f"the system is singular in practice; '{parameter}' depends on "
-            f"the scale: use about {suggestion:.3g} here (its value for a "
-            f"unit-area surface, rescaled), or rescale the surface "
-            f"(NormalizeArea)")
+def _check_scale(S: sp.csr_matrix, m: np.ndarray, parameter: str,
+                 value: float, on_mass: bool):
+    """The mass term must stand out of the stiffness term's rounding:
+    ``value`` (named ``parameter``) weighs the mass term when ``on_mass``,
+    else the stiffness term. Both are in absolute units, so a weight for
+    another scale can make the system singular in float64; the message
+    gives the usable bound and, for an extreme scale, the rescaling."""
+    ratio = m.max() / abs(S).max()
+    share = value * ratio if on_mass else ratio / value
+    if share >= RESOLVABLE_MASS:
+        return
+    bound = RESOLVABLE_MASS / ratio if on_mass else ratio / RESOLVABLE_MASS
+    area = m.sum()
+    rescale = '' if 1e-6 <= area <= 1e6 else \
+        ', or rescale the surface to about unit area (NormalizeArea)'
+    raise ValueError(
+        f"'{parameter}' = {value:.3g} is too {'small' if on_mass else 'large'}"
+        f" for this surface (total area {area:.3g}): the mass term is "
+        f"{share:.1e} of the stiffness term, below float64 rounding, so the "
+        f"system is singular in practice; use '{parameter}' "
+        f"{'at least' if on_mass else 'at most'} {bound:.2g}{rescale}")
 
 
 def _check_weight(value, name: str) -> float:
@@ -204,7 +211,7 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
                          f"M is singular; remove unreferenced vertices and "
                          f"degenerate triangles")
     if alpha > 0:
-        _check_scale(S, m, 1.0, alpha, 'alpha', alpha * m.sum())
+        _check_scale(S, m, 'alpha', alpha, on_mass=False)
     can_split = beta > 0 and alpha * alpha >= 4 * beta
     if split and not can_split:
         raise ValueError(f"split=True needs alpha^2 >= 4 beta (and beta > "
@@ -282,7 +289,7 @@ def poisson(data, eta: float, y: Optional[Tensor] = None,
                          f"got {eta!r}")
     S, m = stiffness_and_mass(data, robust)
     if (m > 0).all():
-        _check_scale(S, m, eta, 1.0, 'eta', eta / m.sum())
+        _check_scale(S, m, 'eta', eta, on_mass=True)
     return _solve(data, (S + eta * sp.diags(m)).tocsr(), m, y, solver, tol,
                   ratio, lower_bound, cycle, max_iter, method)
 
@@ -361,7 +368,7 @@ def conformal_flow(data, step: float, steps: int = 10,
     pos = check_points(data.pos)
     robust = uses_robust_laplacian(data, robust)
     S, m = stiffness_and_mass(data, robust)
-    _check_scale(S, m, 1.0, step, 'step', step * m.sum())
+    _check_scale(S, m, 'step', step, on_mass=False)
     if solver is None:
         solver = _default_solver(data, ratio, lower_bound)
     face = data.face.cpu()

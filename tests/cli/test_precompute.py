@@ -285,8 +285,8 @@ def test_a_failed_overwrite_leaves_the_earlier_results(tmp_path, capsys):
     out = tmp_path / 'out'
     argv = ['--quiet', 'precompute', 'mls', str(src), str(out)]
     assert cli(argv + ['--k', '3'], capsys)[0] == 0
-    before = {f: (out / f).read_bytes() for f in ('a.pt', 'sub/b.pt',
-                                                 'c.pt', 'precompute.json')}
+    before = {f: (out / f).read_bytes()
+              for f in ('a.pt', 'sub/b.pt', 'c.pt', 'precompute.json')}
     # every file fails (a.obj has 42 points): the folder is as it was
     code, _, stderr = cli(argv + ['--k', '100', '--overwrite'], capsys)
     assert code == 2

@@ -482,7 +482,7 @@ def test_a_rerun_replaces_the_results_whole(files, tmp_path, capsys):
 
 
 def test_foreign_files_need_overwrite_and_are_kept(files, tmp_path,
-                                                  capsys):
+                                                   capsys):
     out = tmp_path / 'mine'
     out.mkdir()
     (out / 'notes.txt').write_text('my notes')

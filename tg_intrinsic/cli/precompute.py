@@ -222,9 +222,9 @@ def _check_neighbours(data, kind: str, settings: Dict, source: str):
     """A neighbour count above the points of a file, named by its option
     (the transforms only know their own argument names)."""
     n = data.num_nodes
-    options = {'mls': [('--k', 'k')] + ([] if 'normal' in data or
-                                         'face' in data
-                                         else [('--normal-k', 'normal_k')]),
+    estimated = 'normal' not in data and 'face' not in data
+    options = {'mls': [('--k', 'k')] + ([('--normal-k', 'normal_k')]
+                                        if estimated else []),
                'gravo': [] if 'face' in data else [('--k', 'k')]}
     for option, name in options.get(kind, []):
         if settings[name] > n:

@@ -109,10 +109,10 @@ def read_surface(path: str, weld: bool = True, return_inverse: bool = False
     if face is not None and weld:
         pos, face, properties, inverse = _weld(path, pos, face, properties)
     if len(pos) < 3:
+        welded = ' after welding' if len(inverse) > len(pos) else ''
         raise ValueError(f"'{path}' has only {len(pos)} "
                          f"{'vertex' if len(pos) == 1 else 'vertices'}"
-                         f"{' after welding' if len(inverse) > len(pos) else ''}"
-                         f"; a surface needs at least 3")
+                         f"{welded}; a surface needs at least 3")
     if return_inverse:
         return pos, face, properties, inverse
     return pos, face, properties

@@ -56,3 +56,10 @@ def test_nearest_centroid_baseline():
     test = np.array([[0.2, 0.1], [4.9, 5.2]])
     assert nearest_centroid(train, labels, test, np.array([0, 1])) == 1.0
     assert nearest_centroid(train, labels, test, np.array([1, 0])) == 0.0
+
+
+def test_demo_keeps_a_folder_of_other_files(tmp_path, capsys):
+    (tmp_path / 'thesis.tex').write_text('mine')
+    code, _, err = run_cli(capsys, 'demo', '--quick', '--out', tmp_path)
+    assert_user_error(code, err, 'demo', 'thesis.tex', '--overwrite')
+    assert [p.name for p in tmp_path.iterdir()] == ['thesis.tex']

@@ -72,7 +72,12 @@ SETTINGS = {
 
 def add_arguments(parser):
     parser.add_argument('--out', default=os.path.join('runs', 'demo'),
-                        help='output folder (default: runs/demo)')
+                        help='output folder (default: runs/demo); the '
+                        'results replace those of an earlier demo there '
+                        'only once all of them are written')
+    parser.add_argument('--overwrite', action='store_true',
+                        help='write into --out even when it holds files '
+                        'the demo did not write (they are kept)')
     parser.add_argument('--root', default='data',
                         help='cache folder of the synthetic data sets '
                         '(default: data)')
@@ -175,7 +180,7 @@ def learning_part(model: str, args, out: str) -> dict:
             'baselines': baselines,
             'train_seconds': round(history[-1]['seconds'], 1),
             'figures': [os.path.basename(figure)],
-            'run_folder': os.path.join(os.path.basename(out), model)}
+            'run_folder': model}  # relative to the demo's folder
 
 
 def _pyamg_solve(A, b, tol):
@@ -484,12 +489,24 @@ def markdown(summary: dict) -> str:
 
 
 def run(args):
+    from tg_intrinsic.io.results import result_folder
+    parts = args.only or list(PARTS)
+    with result_folder(args.out, 'demo', args.overwrite,
+                       inputs=[args.root]) as staging:
+        summary = _run_parts(args, parts, staging)
+    print('\n'.join(line for line in markdown(summary).split('\n')[2:]
+                    if not line.startswith('![')))
+    print(f"Wrote {os.path.join(args.out, 'summary.md')}, summary.json and "
+          f"{sum(len(summary[p]['figures']) for p in parts)} figures to "
+          f"{os.path.abspath(args.out)} in {summary['seconds']:.0f} s")
+    return 0
+
+
+def _run_parts(args, parts, out: str) -> dict:
+    """Runs the demo's ``parts`` writing into ``out``; the summary."""
     import torch
     from tg_intrinsic.utils import atomic_write, atomic_write_json, \
         machine_info
-    from .common import output_folder
-    out = output_folder(args.out)
-    parts = args.only or list(PARTS)
     torch.manual_seed(0)
     summary = {'quick': args.quick, 'parts': parts,
                'machine': machine_info()}
@@ -498,12 +515,6 @@ def run(args):
     def say(text):
         if not args.quiet:
             print(f'  {text}', flush=True)
-
-    def save():
-        summary['seconds'] = round(time.perf_counter() - started, 1)
-        atomic_write_json(os.path.join(out, 'summary.json'), summary)
-        atomic_write(os.path.join(out, 'summary.md'),
-                     lambda f: f.write(markdown(summary)), 'w')
 
     titles = {'deltanet': 'DeltaConv: training DeltaNet',
               'hsn': 'Harmonic Surface Networks: training HSN',
@@ -519,10 +530,8 @@ def run(args):
         else:
             summary[part] = svbrdf_part(args, out, say)
         summary[part]['part_seconds'] = round(time.perf_counter() - begin, 1)
-        save()  # after every part: an interrupted demo keeps what it did
-    print('\n'.join(line for line in markdown(summary).split('\n')[2:]
-                    if not line.startswith('![')))
-    print(f"Wrote {os.path.join(out, 'summary.md')}, summary.json and "
-          f"{sum(len(summary[p]['figures']) for p in parts)} figures to "
-          f"{os.path.abspath(out)} in {summary['seconds']:.0f} s")
-    return 0
+    summary['seconds'] = round(time.perf_counter() - started, 1)
+    atomic_write_json(os.path.join(out, 'summary.json'), summary)
+    atomic_write(os.path.join(out, 'summary.md'),
+                 lambda f: f.write(markdown(summary)), 'w')
+    return summary

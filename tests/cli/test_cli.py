@@ -23,6 +23,9 @@ def test_python_dash_m_and_no_command():
                             capture_output=True, text=True)
     assert result.returncode == 2
     assert all(command in result.stdout for command in COMMANDS)
+    # the help, and one line on stderr that says what is missing
+    assert result.stderr.strip() == ('tg-intrinsic: error: give a COMMAND: '
+                                     + ', '.join(COMMANDS))
     result = subprocess.run([sys.executable, '-m', 'tg_intrinsic', 'nope'],
                             capture_output=True, text=True)
     assert result.returncode == 2

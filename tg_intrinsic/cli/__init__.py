@@ -63,6 +63,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     args.quiet = getattr(args, 'quiet', False)
     if args.command is None:
         parser.print_help()
+        print(f"tg-intrinsic: error: give a COMMAND: {', '.join(COMMANDS)}",
+              file=sys.stderr)
         return 2
     prog = f'tg-intrinsic {args.command}'
     with warnings.catch_warnings():

@@ -83,7 +83,7 @@ def read_points(path: str, max_points: Optional[int] = None
                          f"{'/'.join(POINT_EXTENSIONS)}")
     normal = label = None
     if ext == '.ply':
-        pos, _, props = read_surface(path)
+        pos, _, props = read_surface(path, weld=False)  # points as stored
         if all(k in props for k in ('nx', 'ny', 'nz')):
             normal = np.stack([props[k] for k in ('nx', 'ny', 'nz')], 1)
         name = next((k for k in PLY_LABEL_PROPERTIES if k in props), None)

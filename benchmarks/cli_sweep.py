@@ -1,0 +1,470 @@
+"""A careful new user's sweep of the command line (issue 30): bad and
+unusual inputs over every sub-command, each run in a fresh sandbox of
+files that other tools wrote, with four checks per case:
+
+- **exit code**: only 0, 2 (a user mistake, one line) or 130;
+- **no data loss**: every file that existed before the run (inputs, a
+  user's own files, earlier results) is byte for byte the same after it,
+  except the results a successful run replaced in its own output folder;
+- **no wrong result**: a run that exits 0 wrote what the case expects
+  (checked per case: vertex counts after welding, settings recorded);
+- **a message that names the user's own option or file**: the error line
+  holds one of the case's options (``--k``) or a file name it gave.
+
+Writes ``benchmarks/results/cli_sweep.json`` (every case with its exit
+code, message and verdicts) and prints the counts. Runs in-process
+through :func:`tg_intrinsic.cli.main`, a few minutes on 2 cores.
+
+    python benchmarks/cli_sweep.py
+"""
+import contextlib
+import hashlib
+import io
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+
+import numpy as np
+import trimesh
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), '..'))
+from tg_intrinsic.cli import main  # noqa: E402
+from tg_intrinsic.io import write_ply  # noqa: E402
+from tg_intrinsic.utils import atomic_write_json, machine_info  # noqa: E402
+
+RESULTS = os.path.join(os.path.dirname(__file__), 'results',
+                       'cli_sweep.json')
+
+
+# ---------------------------------------------------------------- files
+def make_files(root: str):
+    """The files of the sandbox: meshes as other tools write them, bad
+    ones, signals, a user's own folder and a scene."""
+    ico = trimesh.creation.icosphere(2)
+    ico.export(os.path.join(root, 'ico.obj'))
+    ico.export(os.path.join(root, 'ico.stl'))
+    ico.export(os.path.join(root, 'ico.off'))
+    with open(os.path.join(root, 'ascii.ply'), 'wb') as f:
+        f.write(trimesh.exchange.ply.export_ply(
+            trimesh.Trimesh(ico.vertices, ico.faces, process=False,
+                            vertex_attributes={'heat': ico.vertices[:, 2]}),
+            encoding='ascii'))
+    soup = trimesh.Trimesh(ico.vertices[ico.faces].reshape(-1, 3),
+                           np.arange(3 * len(ico.faces)).reshape(-1, 3),
+                           process=False)
+    soup.export(os.path.join(root, 'soup.obj'))
+    write_ply(os.path.join(root, 'cloud.ply'),
+              ico.vertices + 0.0, properties={'q': ico.vertices[:, 0]})
+    text = open(os.path.join(root, 'ascii.ply')).read().split('\n')
+    first = text.index('end_header') + 1
+    text[first] = 'nan ' + text[first].split(' ', 1)[1]
+    open(os.path.join(root, 'nan_ascii.ply'), 'w').write('\n'.join(text))
+    small = {'one.obj': 'v 0 0 0\n', 'two.obj': 'v 0 0 0\nv 1 0 0\n',
+             'garbage.obj': 'this is not a mesh\n', 'empty.off': '',
+             'repeat.obj': 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 1 2\n',
+             'past.off': 'OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n',
+             'notes.txt': 'a user file\n', 'mesh.xyz': '0 0 0\n'}
+    for name, body in small.items():
+        open(os.path.join(root, name), 'w').write(body)
+    trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
+                    [[0, 1, 2], [0, 1, 3], [0, 2, 3]],
+                    process=False).export(os.path.join(root, 'three.obj'))
+    # quads, negative indices, comments, capitals, spaces, a point cloud
+    # with normals, a binary PLY with a NaN
+    open(os.path.join(root, 'quads.obj'), 'w').write(
+        '# a cube\n' + ''.join(f'v {x} {y} {z}\n' for x in (0, 1)
+                               for y in (0, 1) for z in (0, 1))
+        + 'f 1 2 4 3\nf 5 7 8 6\nf 1 5 6 2\nf 3 4 8 7\nf 1 3 7 5\n'
+        'f 2 6 8 4\n')
+    open(os.path.join(root, 'negative.obj'), 'w').write(
+        'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf -4 -3 -2\nf -4 -3 -1\n'
+        'f -4 -2 -1\nf -3 -2 -1\n')
+    ico.export(os.path.join(root, 'CAPS.OBJ'))
+    ico.export(os.path.join(root, 'with space.obj'))
+    write_ply(os.path.join(root, 'normals.ply'), ico.vertices + 0.0,
+              properties={'nx': ico.vertices[:, 0], 'ny': ico.vertices[:, 1],
+                          'nz': ico.vertices[:, 2]})
+    bad_pos = ico.vertices + 0.0
+    bad_pos[3, 1] = np.nan
+    write_ply(os.path.join(root, 'nan_binary.ply'), bad_pos, ico.faces)
+    write_ply(os.path.join(root, 'zero_normals.ply'), ico.vertices + 0.0,
+              properties={'nx': 0 * ico.vertices[:, 0],
+                          'ny': 0 * ico.vertices[:, 1],
+                          'nz': 0 * ico.vertices[:, 2]})
+    n = len(ico.vertices)
+    np.savetxt(os.path.join(root, 'sig.txt'), np.ones(n))
+    np.savetxt(os.path.join(root, 'sig.csv'), np.ones((n, 3)), delimiter=',')
+    open(os.path.join(root, 'words.txt'), 'w').write('a\nb\n')
+    os.makedirs(os.path.join(root, 'empty'))
+    os.makedirs(os.path.join(root, 'only_text'))
+    open(os.path.join(root, 'only_text', 'readme.txt'), 'w').write('x')
+    np.save(os.path.join(root, 'sig.npy'), np.random.default_rng(0).normal(
+        size=(n, 2)))
+    np.save(os.path.join(root, 'short.npy'), np.zeros(n - 1))
+    np.save(os.path.join(root, 'cube.npy'), np.zeros((n, 2, 2)))
+    np.save(os.path.join(root, 'nan.npy'), np.full(n, np.nan))
+    np.save(os.path.join(root, 'stored.npy'), np.zeros(3 * len(ico.faces)))
+    os.makedirs(os.path.join(root, 'folder.obj'))
+    # a folder of meshes, one of them linked in
+    for sub in ('meshes/a', 'elsewhere'):
+        os.makedirs(os.path.join(root, sub))
+    ico.export(os.path.join(root, 'meshes', 'a', 'x.obj'))
+    trimesh.creation.icosphere(1).export(os.path.join(root, 'elsewhere',
+                                                      'y.off'))
+    os.symlink(os.path.join(root, 'elsewhere'),
+               os.path.join(root, 'meshes', 'linked'))
+    # a user's own folder, and earlier results
+    os.makedirs(os.path.join(root, 'mine'))
+    open(os.path.join(root, 'mine', 'thesis.tex'), 'w').write('mine')
+    with contextlib.redirect_stderr(io.StringIO()), \
+            contextlib.redirect_stdout(io.StringIO()):
+        assert main(['solve', os.path.join(root, 'ico.obj'), '--smooth',
+                     '1e-3', '--out', os.path.join(root, 'earlier'),
+                     '--quiet']) == 0
+        assert main(['precompute', 'mls', os.path.join(root, 'meshes'),
+                     os.path.join(root, 'cache'), '--k', '3',
+                     '--quiet']) == 0
+        assert main(['svbrdf', '--write-example',
+                     os.path.join(root, 'scene'), '--example-views', '4',
+                     '--example-image-size', '16',
+                     '--example-subdivisions', '1', '--quiet']) == 0
+
+
+# ---------------------------------------------------------------- checks
+def snapshot(root: str) -> dict:
+    """Every file under ``root``: relative path -> sha1."""
+    found = {}
+    for folder, dirs, files in os.walk(root):
+        for name in files:
+            path = os.path.join(folder, name)
+            with open(path, 'rb') as f:
+                found[os.path.relpath(path, root)] = hashlib.sha1(
+                    f.read()).hexdigest()
+    return found
+
+
+def out_folder(argv):
+    for option in ('--out', '--write-example'):
+        if option in argv:
+            return argv[argv.index(option) + 1]
+    if argv[:1] == ['precompute'] and len(argv) > 3:
+        return argv[3]
+    return None
+
+
+def named(line: str, argv) -> bool:
+    """The error line names one of the user's options or files."""
+    words = [a for a in argv if a.startswith('--')] + \
+        [os.path.basename(a.rstrip('/')) for a in argv if '/' in a]
+    if not any(words):  # nothing given: the message names what is missing
+        return '--' in line or 'argument' in line
+    return 'argument ' in line or any(w and w in line for w in words)
+
+
+def vertices_of(path):
+    from tg_intrinsic.io import read_surface
+    return len(read_surface(path, weld=False)[0])
+
+
+# ---------------------------------------------------------------- cases
+def cases():
+    """(argv with {} for the sandbox, expected exit code, check of a
+    success or None)."""
+    S = ['solve']
+    ok_solve = {'report.json', 'result.ply', 'result.png'}
+
+    def solve_ok(count):
+        def check(root, out):
+            return ok_solve <= set(os.listdir(out)) and \
+                vertices_of(os.path.join(out, 'result.ply')) == count
+        return check
+    yield S + ['{}/ico.obj', '--smooth', '1e-3', '--out', '{}/o'], 0, \
+        solve_ok(162)
+    for name in ('ico.stl', 'soup.obj', 'ascii.ply', 'ico.off'):
+        yield S + [f'{{}}/{name}', '--smooth', '1e-3', '--out', '{}/o'], \
+            0, solve_ok(162)
+    yield S + ['{}/ascii.ply', '--poisson', '1', '--signal', 'heat',
+               '--out', '{}/o'], 0, solve_ok(162)
+    yield S + ['{}/soup.obj', '--smooth', '1e-3', '--signal',
+               '{}/stored.npy', '--out', '{}/o'], 0, solve_ok(162)
+    yield S + ['{}/three.obj', '--smooth', '1e-3', '--out', '{}/o'], 0, \
+        solve_ok(4)
+    yield S + ['{}/cloud.ply', '--poisson', '1', '--signal', 'q',
+               '--out', '{}/o'], 0, solve_ok(162)
+    yield S + ['{}/ico.obj', '--smooth', '1e-3', '--out', '{}/earlier'], \
+        0, solve_ok(162)
+    yield S + ['{}/ico.obj', '--smooth', '1e-3', '--out', '{}/mine',
+               '--overwrite'], 0, \
+        lambda root, out: os.path.exists(os.path.join(out, 'thesis.tex'))
+    for bad in ('nan_ascii.ply', 'one.obj', 'two.obj', 'garbage.obj',
+                'empty.off', 'repeat.obj', 'past.off', 'missing.obj',
+                'folder.obj', 'notes.txt', 'mesh.xyz'):
+        yield S + [f'{{}}/{bad}', '--smooth', '1', '--out', '{}/o'], 2, None
+    for signal in ('short.npy', 'cube.npy', 'nan.npy', 'nothing',
+                   '{}/missing.npy', '{}/ascii.ply:nope'):
+        yield S + ['{}/ico.obj', '--smooth', '1', '--signal', signal,
+                   '--out', '{}/o'], 2, None
+    for value in ('1e300', '-1', '0', 'nan', 'inf', 'x'):
+        yield S + ['{}/ico.obj', '--smooth', value, '--out', '{}/o'], 2, \
+            None
+    yield S + ['{}/ico.obj', '--poisson', '1e-300', '--signal',
+               '{}/sig.npy', '--out', '{}/o'], 2, None
+    yield S + ['{}/ico.obj', '--smooth', '1', '--ratio', '1', '--out',
+               '{}/o'], 2, None
+    yield S + ['{}/earlier/result.ply', '--smooth', '1', '--out',
+               '{}/earlier'], 2, None
+    yield S + ['{}/ico.obj', '--smooth', '1', '--out', '{}/mine'], 2, None
+    yield S + ['{}/ico.obj', '--smooth', '1', '--out', '{}/notes.txt'], 2, \
+        None
+    yield S + ['{}/cloud.ply', '--conformal-flow', '1e-3', '--out',
+               '{}/o'], 2, None
+    yield S + ['{}/ico.obj', '--conformal-flow', '1e-3', '--steps', '2',
+               '--out', '{}/o'], 0, solve_ok(162)
+
+    for name in ('quads.obj', 'negative.obj', 'CAPS.OBJ',
+                 'with space.obj', 'normals.ply'):
+        count = {'quads.obj': 8, 'negative.obj': 4}.get(name, 162)
+        yield S + [f'{{}}/{name}', '--smooth', '1e-3', '--out', '{}/o'], \
+            0, solve_ok(count)
+    for signal in ('{}/sig.txt', '{}/sig.csv', '{}/ascii.ply:heat'):
+        yield S + ['{}/ico.obj', '--smooth', '1e-3', '--signal', signal,
+                   '--out', '{}/o'], 0, solve_ok(162)
+    yield S + ['{}/ico.obj', '--smooth', '1e-3', '--out', '{}/a/b/c'], 0, \
+        solve_ok(162)
+    yield S + ['{}/ico.obj', '--smooth', '1e-3', '--out', '{}/o/'], 0, \
+        solve_ok(162)
+    yield S + ['{}/ico.obj', '--smooth', '1e-3', '--bilaplacian', '1e-6',
+               '--method', 'pcg', '--out', '{}/o'], 0, solve_ok(162)
+    yield S + ['{}/ico.obj', '--smooth', '1e-3', '--cycle', 'W',
+               '--out', '{}/earlier'], 0, solve_ok(162)
+    for bad in ('nan_binary.ply', 'quads.stl'):
+        yield S + [f'{{}}/{bad}', '--smooth', '1', '--out', '{}/o'], 2, None
+    yield S + ['{}/ico.obj', '--smooth', '1e-3', '--signal',
+               '{}/cloud.ply:q', '--out', '{}/o'], 0, solve_ok(162)
+    for signal in ('{}/words.txt', '{}/folder.obj', '{}/notes.txt'):
+        yield S + ['{}/ico.obj', '--smooth', '1', '--signal', signal,
+                   '--out', '{}/o'], 2, None
+    for option, value in (('--steps', '0'), ('--tol', '0'),
+                          ('--max-cycles', '0'), ('--cycle', 'X'),
+                          ('--lower-bound', '0'), ('--method', 'lu'),
+                          ('--ratio', '-2'), ('--tol', 'inf')):
+        yield S + ['{}/ico.obj', '--smooth', '1', option, value, '--out',
+                   '{}/o'], 2, None
+    yield S + ['{}/ico.obj', '--bilaplacian', '1', '--poisson', '1',
+               '--signal', '{}/sig.npy', '--out', '{}/o'], 2, None
+    yield S + ['{}/ico.obj', '--smooth', '1', '--poisson', '1',
+               '--out', '{}/o'], 2, None
+    yield S + ['{}/ico.obj', '--smooth', '1', '--out', '{}/o', '--bogus'], \
+        2, None
+    yield S + ['{}/ico.obj', '--smooth', '1', '--out', '{}'], 2, None
+    yield S + ['{}/ico.obj', '--smooth', '1', '--out', '{}/mine/sub'], \
+        0, solve_ok(162)
+
+    P = ['precompute']
+
+    def manifest(**expected):
+        def check(root, out):
+            with open(os.path.join(out, 'precompute.json')) as f:
+                settings = json.load(f)['settings']
+            return all(settings[k] == v for k, v in expected.items())
+        return check
+    yield P + ['mls', '{}/meshes', '{}/p', '--k', '4'], 0, manifest(k=4)
+    yield P + ['mls', '{}/meshes', '{}/cache', '--k', '3'], 0, \
+        manifest(k=3)
+    yield P + ['mls', '{}/meshes', '{}/cache', '--k', '5',
+               '--overwrite'], 0, manifest(k=5)
+    yield P + ['mls', '{}/meshes', '{}/cache', '--k', '500',
+               '--overwrite'], 2, None
+    yield P + ['mls', '{}/meshes', '{}/cache', '--k', '5'], 2, None
+    yield P + ['gravo', '{}/meshes', '{}/mine'], 2, None
+    yield P + ['gravo', '{}/ico.stl', '{}/g.pt', '--lower-bound', '10'], \
+        0, lambda root, out: os.path.getsize(out) > 0
+    yield P + ['hsn', '{}/cloud.ply', '{}/h'], 2, None
+    yield P + ['mls', '{}/missing', '{}/p'], 2, None
+    yield P + ['mls', '{}/meshes', '{}/p.pt'], 2, None
+    yield P + ['mls', '{}/notes.txt', '{}/p'], 2, None
+    yield P + ['gravo', '{}/meshes', '{}/p', '--ratio', '1'], 2, None
+    yield P + ['logmap', '{}/repeat.obj', '{}/p'], 2, None
+    yield P + ['mls', '{}/cloud.ply', '{}/p', '--normal-k', '500'], 2, None
+    yield P + ['mls', '{}/normals.ply', '{}/p', '--normal-k', '500'], 0, \
+        manifest(normal_k=500)
+    yield P + ['mls', '{}/zero_normals.ply', '{}/p'], 2, None
+    yield P + ['mls', '{}/empty', '{}/p'], 2, None
+    yield P + ['mls', '{}/only_text', '{}/p'], 2, None
+    yield P + ['mls', '{}/meshes', '{}/meshes'], 2, None
+    yield P + ['mls', '{}/meshes', '{}/meshes/out'], 0, manifest(k=20)
+    yield P + ['gravo', '{}/meshes', '{}/p', '--workers', '2',
+               '--lower-bound', '10'], 0, manifest(lower_bound=10)
+    yield P + ['gravo', '{}/soup.obj', '{}/p', '--dtype', 'float64',
+               '--lower-bound', '10'], 0, manifest(dtype='float64')
+    yield P + ['gravo', '{}/meshes', '{}/cache'], 2, None
+    yield P + ['logmap', '{}/ico.obj', '{}/p', '--radius', '0'], 2, None
+    yield P + ['hsn', '{}/ico.obj', '{}/p', '--rings', '0'], 2, None
+    yield P + ['hsn', '{}/ico.obj', '{}/p', '--max-order', '-1'], 2, None
+    yield P + ['mls', '{}/meshes', '{}/p', '--dtype', 'float16'], 2, None
+    yield P + ['mls', '{}/meshes', '{}/notes.txt'], 2, None
+    yield P + ['mls', '{}/meshes', '{}/p', '--workers', '0'], 2, None
+    yield P + ['bogus', '{}/meshes', '{}/p'], 2, None
+
+    V = ['svbrdf']
+    yield V + ['--write-example', '{}/mine'], 2, None
+    yield V + ['--write-example', '{}/scene', '--example-views', '4',
+               '--example-image-size', '16', '--example-subdivisions',
+               '1'], 0, lambda root, out: os.path.exists(
+                   os.path.join(out, 'cameras.json'))
+    yield V + ['{}/scene', '--out', '{}/scene'], 2, None
+    yield V + ['{}/scene', '--out', '{}/scene/images'], 2, None
+    yield V + ['{}/missing', '--out', '{}/v'], 2, None
+    yield V + ['{}/scene', '--out', '{}/v', '--device', 'bogus'], 2, None
+    yield V + ['{}/scene', '--out', '{}/v', '--l-max', '60'], 2, None
+    yield V + ['{}/scene', '--out', '{}/mine'], 2, None
+    yield V + ['{}/scene', '--out', '{}/v'], 0, \
+        lambda root, out: os.path.exists(os.path.join(out, 'maps.npz'))
+    yield V + ['--write-example', '{}/notes.txt'], 2, None
+    yield V + ['{}/scene', '--write-example', '{}/w'], 2, None
+    yield V + ['--write-example', '{}/w', '--out', '{}/v'], 2, None
+    yield V + ['--write-example', '{}/w', '--example-views', '0'], 2, None
+    yield V + ['{}/scene', '--example-views', '3', '--out', '{}/v'], 2, None
+    yield V + ['{}/meshes', '--out', '{}/v'], 2, None
+    yield V + ['{}/ico.obj', '--out', '{}/v'], 2, None
+    for option, value in (('--refine', '-1'), ('--tv-weight', '-1'),
+                          ('--metallic', '2'), ('--dtype', 'float16'),
+                          ('--l-max', '-1'), ('--device', 'cuda:7')):
+        yield V + ['{}/scene', '--out', '{}/v', option, value], 2, None
+    yield V, 2, None
+
+    yield ['info', '--bogus'], 2, None
+    yield ['bogus'], 2, None
+    yield [], 2, None
+    yield ['demo', '--only', 'everything'], 2, None
+    yield ['demo', '--out', '{}/notes.txt', '--quick'], 2, None
+    yield ['demo', '--out', '{}/mine', '--quick'], 2, None
+
+    T = ['train']
+    tiny = ['--epochs', '1', '--num-points', '64', '--shapes-per-class',
+            '2', '--batch-size', '4', '--quiet', '--root', '{}/data']
+    yield T + ['deltanet', '--out', '{}/notes.txt'] + tiny, 2, None
+    yield T + ['deltanet', '--out', '{}/mine'] + tiny, 2, None
+    yield T + ['deltanet', '--device', 'bogus', '--out', '{}/t'] + tiny, \
+        2, None
+    yield T + ['deltanet', '--dataset', '{}/missing', '--out',
+               '{}/t'] + tiny, 2, None
+    yield T + ['deltanet', '--lr', '-1', '--out', '{}/t'] + tiny, 2, None
+    yield T + ['hsn', '--resume', '--out', '{}/earlier'] + tiny, 2, None
+    yield T + ['deltanet', '--out', '{}/t'] + tiny + ['--epochs', '0'], 2, \
+        None
+    yield T + ['deltanet', '--dataset', '{}/meshes', '--out', '{}/t'] + \
+        tiny, 2, None
+    yield T + ['deltanet', '--dataset', '{}/empty', '--out', '{}/t'] + \
+        tiny, 2, None
+    yield T + ['deltanet', '--dataset', '{}/ico.obj', '--out', '{}/t'] + \
+        tiny, 2, None
+    yield T + ['gcn', '--out', '{}/t'] + tiny, 2, None
+    yield T + ['deltanet', '--protocol', 'nope', '--out', '{}/t'] + tiny, \
+        2, None
+    yield T + ['deltanet', '--out', '{}/meshes'] + tiny, 2, None
+
+
+def run_case(template, expected, check, base):
+    """Runs one case in a copy of the sandbox ``base``."""
+    root = tempfile.mkdtemp(prefix='sweep-')
+    shutil.rmtree(root)
+    shutil.copytree(base, root, symlinks=True)
+    # links point into the copy
+    link = os.path.join(root, 'meshes', 'linked')
+    os.remove(link)
+    os.symlink(os.path.join(root, 'elsewhere'), link)
+    argv = [a.replace('{}', root) for a in template]
+    before = snapshot(root)
+    stderr = io.StringIO()
+    start = time.perf_counter()
+    with contextlib.redirect_stderr(stderr), \
+            contextlib.redirect_stdout(io.StringIO()):
+        try:
+            code = main(argv)
+        except BaseException as error:  # noqa: BLE001 - recorded
+            code = f'raised {type(error).__name__}'
+    seconds = time.perf_counter() - start
+    after = snapshot(root)
+    out = out_folder(argv)
+    out_rel = None if out is None else os.path.relpath(out, root)
+    lines = [ln for ln in stderr.getvalue().splitlines()
+             if ': error:' in ln or 'unexpected' in ln]
+    message = lines[-1] if lines else ''
+    # a failed run changes nothing; a successful one only its --out
+    changed = [name for name, digest in before.items()
+               if after.get(name) != digest and not (
+                   code == 0 and out_rel is not None and
+                   (name == out_rel or name.startswith(out_rel + os.sep))
+                   and not name.startswith(os.path.join(out_rel, 'thesis')))]
+    # new files: a success's results; precompute, which resumes file by
+    # file, also records its settings and failures in a failed run's
+    # output folder (or, for --overwrite, the staging folder beside it)
+    precompute = argv[:1] == ['precompute']
+    regions = [] if out_rel is None else [out_rel] if code == 0 or \
+        not precompute else \
+        [out_rel, os.path.join(os.path.dirname(out_rel),
+                               f'.{os.path.basename(out_rel)}.overwrite')]
+    if code != 0 and not precompute:
+        regions = []
+    stray = [name for name in after if name not in before and
+             not any(name == r or name.startswith(r + os.sep)
+                     for r in regions)
+             and not name.startswith('data' + os.sep)]
+    result = {
+        'argv': [a.replace(root, '{}') for a in argv],
+        'exit_code': code, 'expected': expected,
+        'message': message.replace(root, '{}'),
+        'seconds': round(seconds, 2),
+        'allowed_exit_code': code in (0, 2, 130),
+        'as_expected': code == expected,
+        'data_kept': not changed, 'changed': changed,
+        'no_stray_files': not stray, 'stray': stray[:5],
+        'right_result': code != 0 or check is None or bool(check(root, out)),
+        'message_names_input': code != 2 or named(message, argv),
+    }
+    shutil.rmtree(root, ignore_errors=True)
+    return result
+
+
+def main_sweep():
+    base = tempfile.mkdtemp(prefix='sweep-base-')
+    make_files(base)
+    results = []
+    for template, expected, check in cases():
+        result = run_case(template, expected, check, base)
+        results.append(result)
+        verdict = all(result[k] for k in (
+            'allowed_exit_code', 'as_expected', 'data_kept',
+            'no_stray_files', 'right_result', 'message_names_input'))
+        print(f"{'ok ' if verdict else 'BAD'} {result['exit_code']!s:>3} "
+              f"{' '.join(result['argv'])[:90]}", flush=True)
+        if not verdict:
+            print(f"      {result}", flush=True)
+    shutil.rmtree(base, ignore_errors=True)
+    counts = {
+        'cases': len(results),
+        'exit_0': sum(r['exit_code'] == 0 for r in results),
+        'exit_2': sum(r['exit_code'] == 2 for r in results),
+        'other_exit_codes': sum(not r['allowed_exit_code']
+                                for r in results),
+        'unexpected_exit_codes': sum(not r['as_expected'] for r in results),
+        'data_loss': sum(not r['data_kept'] for r in results),
+        'stray_files': sum(not r['no_stray_files'] for r in results),
+        'wrong_results': sum(not r['right_result'] for r in results),
+        'messages_not_naming_the_input': sum(
+            not r['message_names_input'] for r in results),
+    }
+    print(json.dumps(counts, indent=1))
+    atomic_write_json(RESULTS, {'counts': counts, 'cases': results,
+                                'machine': machine_info()})
+    bad = sum(v for k, v in counts.items()
+              if k not in ('cases', 'exit_0', 'exit_2'))
+    return 1 if bad else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main_sweep())

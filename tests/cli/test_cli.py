@@ -46,7 +46,7 @@ def test_debug_shows_the_traceback(capsys):
     (ValueError('first line\n  second line'), 2,
      ['tg-intrinsic info: error: first line second line']),
     (KeyboardInterrupt(), 130,
-     ['tg-intrinsic info: interrupted; outputs written so far are complete']),
+     ['tg-intrinsic info: interrupted; no file was left half-written']),
     (RuntimeError('boom'), 1,
      ['tg-intrinsic info: unexpected RuntimeError: boom', '--debug',
       'please report it']),

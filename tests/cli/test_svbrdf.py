@@ -14,6 +14,7 @@ import torch
 
 from tg_intrinsic.cli import main
 from tg_intrinsic.io import read_scene, read_surface
+from tg_intrinsic.io.results import RECORD
 
 TINY = ['--example-views', '8', '--example-image-size', '32',
         '--example-subdivisions', '2']
@@ -62,7 +63,7 @@ def test_recovery_writes_maps_plys_figures_and_report(scene, tmp_path,
     assert run(['svbrdf', str(scene), '--out', str(out), '--steps', '3',
                 '--quiet']) == 0
     assert capsys.readouterr().out == ''  # --quiet: no summary
-    names = set(os.listdir(out))
+    names = set(os.listdir(out)) - {RECORD}
     assert names == {'maps.npz', 'report.json'} | {
         f'{m}.{e}' for m in MAPS for e in ('ply', 'png')}
     maps = np.load(out / 'maps.npz')
@@ -95,7 +96,8 @@ def test_recovery_writes_maps_plys_figures_and_report(scene, tmp_path,
         assert 0 <= truth[key] < 1, key
     rho = truth['entropy_roughness_error_spearman']
     assert rho is None or -1 <= rho <= 1
-    assert not [n for n in os.listdir(out) if n.startswith('.')]
+    assert [n for n in os.listdir(out) if n.startswith('.')] == [RECORD]
+    assert not [n for n in os.listdir(tmp_path) if n.startswith('.')]
 
 
 def test_subprocess_with_options(scene, tmp_path):
@@ -185,3 +187,218 @@ def test_bad_input_is_one_line_with_exit_code_2(scene, tmp_path, capsys):
     assert run(['svbrdf', str(scene), '--device', 'tpu9']) == 2
     one_line_error(capsys, '--device')
     assert not (tmp_path / 'o').exists()  # nothing written on bad input
+
+
+# ------------------------------------------- result folders (io.results)
+def listing(folder):
+    """Every file under ``folder`` with its bytes."""
+    found = {}
+    for root, _, files in os.walk(folder):
+        for name in files:
+            path = os.path.join(root, name)
+            with open(path, 'rb') as f:
+                found[os.path.relpath(path, folder)] = f.read()
+    return found
+
+
+SMALL = ['--example-views', '4', '--example-image-size', '24',
+         '--example-subdivisions', '1']
+
+
+def test_write_example_keeps_a_users_files(tmp_path, capsys):
+    capture = tmp_path / 'capture'
+    (capture / 'images').mkdir(parents=True)
+    (capture / 'cameras.json').write_text('{"cameras": "mine"}')
+    (capture / 'images' / '000.exr').write_bytes(b'my photograph')
+    before = listing(capture)
+    assert run(['svbrdf', '--write-example', str(capture), '--quiet']
+               + SMALL) == 2
+    one_line_error(capsys, f"--write-example '{capture}' holds files that "
+                   f"tg-intrinsic svbrdf-example did not write",
+                   'cameras.json', '--overwrite')
+    assert listing(capture) == before
+    assert not [n for n in os.listdir(tmp_path) if n.startswith('.')]
+    # --overwrite: the example's files replace those of the same name,
+    # the others are kept
+    (capture / 'notes.txt').write_text('keep me')
+    assert run(['svbrdf', '--write-example', str(capture), '--overwrite',
+                '--quiet'] + SMALL) == 0
+    assert (capture / 'notes.txt').read_text() == 'keep me'
+    assert read_scene(capture).images.shape[0] == 4
+
+
+def test_write_example_replaces_an_earlier_example_whole(tmp_path):
+    folder = tmp_path / 'example'
+    assert run(['svbrdf', '--write-example', str(folder), '--quiet']
+               + SMALL) == 0
+    assert len(os.listdir(folder / 'images')) == 4
+    assert run(['svbrdf', '--write-example', str(folder), '--quiet',
+                '--example-views', '2', '--example-image-size', '24',
+                '--example-subdivisions', '1']) == 0
+    assert sorted(os.listdir(folder / 'images')) == ['000.exr', '001.exr'] \
+        or sorted(os.listdir(folder / 'images')) == ['000.hdr', '001.hdr']
+    assert read_scene(folder).images.shape[0] == 2
+    assert not [n for n in os.listdir(tmp_path) if n.startswith('.')]
+
+
+def test_recovery_never_writes_into_the_scene(scene, tmp_path, capsys):
+    copy = tmp_path / 'scene'
+    shutil.copytree(scene, copy)
+    before = listing(copy)
+    assert run(['svbrdf', str(copy), '--out', str(copy), '--steps', '1',
+                '--quiet']) == 2
+    one_line_error(capsys, f"--out '{copy}' holds the input")
+    assert run(['svbrdf', str(copy), '--out', str(copy / 'images'),
+                '--steps', '1', '--quiet']) == 2
+    one_line_error(capsys, f"--out '{copy / 'images'}' holds the input",
+                   '000.')
+    assert run(['svbrdf', str(copy), '--out', str(copy / 'cameras.json'),
+                '--steps', '1', '--quiet']) == 2
+    one_line_error(capsys, 'cameras.json', 'is a file')
+    assert run(['svbrdf', str(copy), '--out',
+                str(copy / 'cameras.json' / 'out'), '--quiet']) == 2
+    one_line_error(capsys, 'cannot be created', 'is a file, not a folder')
+    assert listing(copy) == before
+
+
+def test_recovery_outputs_appear_together(scene, tmp_path, capsys,
+                                          monkeypatch):
+    out = tmp_path / 'out'
+    out.mkdir()
+    (out / 'mine.txt').write_text('not svbrdf\'s')
+    assert run(['svbrdf', str(scene), '--out', str(out), '--steps', '1',
+                '--quiet']) == 2
+    one_line_error(capsys, f"--out '{out}' holds files that tg-intrinsic "
+                   f"svbrdf did not write (mine.txt)", '--overwrite')
+    assert os.listdir(out) == ['mine.txt']
+    assert run(['svbrdf', str(scene), '--out', str(out), '--steps', '1',
+                '--overwrite', '--quiet']) == 0
+    assert (out / 'mine.txt').read_text() == 'not svbrdf\'s'
+    first = listing(out)
+    assert 'maps.npz' in first and 'report.json' in first
+    # a run that stops while writing (after maps.npz and a PLY) leaves the
+    # results of the run before it as they were
+    from tg_intrinsic.io import figures
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(figures, 'draw_surface', interrupted)
+    assert run(['svbrdf', str(scene), '--out', str(out), '--steps', '2',
+                '--overwrite', '--quiet']) == 130
+    assert listing(out) == first
+    assert not [n for n in os.listdir(tmp_path) if n.startswith('.')]
+    # a rerun replaces them (and only them)
+    monkeypatch.undo()
+    assert run(['svbrdf', str(scene), '--out', str(out), '--steps', '2',
+                '--overwrite', '--quiet']) == 0
+    report = json.loads((out / 'report.json').read_text())
+    assert report['options']['steps'] == 2
+    assert (out / 'mine.txt').exists()
+
+
+# ------------------------------------------------ messages that name the
+# user's own option or file
+def test_recovery_options_with_write_example_are_refused(tmp_path, capsys):
+    folder = tmp_path / 'example'
+    assert run(['svbrdf', '--write-example', str(folder), '--out',
+                str(tmp_path / 'out')] + SMALL) == 2
+    one_line_error(capsys, '--out is not used with --write-example DIR',
+                   "'tg-intrinsic svbrdf DIR --out OUT'")
+    assert run(['svbrdf', '--write-example', str(folder), '--steps', '3',
+                '--refine', '2'] + SMALL) == 2
+    one_line_error(capsys, '--steps, --refine are not used with '
+                   '--write-example DIR')
+    assert not folder.exists() and not (tmp_path / 'out').exists()
+    assert run(['svbrdf', '--write-example', ''] + SMALL) == 2
+    one_line_error(capsys, '--write-example is empty; give a folder')
+    assert run(['svbrdf', str(folder), '--out', '']) == 2
+    one_line_error(capsys, '--out is empty; give a folder')
+
+
+def test_l_max_beyond_the_light_samples(scene, capsys):
+    assert run(['svbrdf', str(scene), '--l-max', '60']) == 2
+    err = one_line_error(capsys, 'argument --l-max: must be at most 15, got '
+                         "'60'", '1024 directions', '(L + 1)^2')
+    assert 'num_light_samples' not in err
+
+
+def test_folder_where_a_scene_file_belongs(scene, tmp_path, capsys):
+    copy = tmp_path / 'scene'
+    shutil.copytree(scene, copy)
+    photo = sorted(os.listdir(copy / 'images'))[2]
+    os.remove(copy / 'images' / photo)
+    (copy / 'images' / photo).mkdir()
+    assert run(['svbrdf', str(copy), '--out', str(tmp_path / 'o')]) == 2
+    one_line_error(capsys, f"'{copy / 'images' / photo}' is a folder, not a "
+                   f"file", f"'images/{photo}'")
+    os.remove(copy / 'cameras.json')
+    (copy / 'cameras.json').mkdir()
+    assert run(['svbrdf', str(copy), '--out', str(tmp_path / 'o')]) == 2
+    one_line_error(capsys, f"'{copy / 'cameras.json'}' is a folder, not a "
+                   f"file")
+    assert not (tmp_path / 'o').exists()
+
+
+@pytest.mark.parametrize('content, reason', [
+    (b'\x93\x1fH\x00' + bytes(range(256)) * 2,
+     'it is not a NumPy .npz file'),
+    (b'base_color = 0.5\n', 'it is not a NumPy .npz file'),
+    (b'', 'the file is empty'),
+    (np.zeros(3), 'one .npy array, not a .npz archive'),
+    ({'base_color': np.zeros((162, 3)),
+      'roughness': np.array(['rough'] * 162)},
+     "its 'roughness' holds <U5, not numbers"),
+    ({'roughness': np.array([{'a': 1}] * 162, dtype=object)},
+     "its 'roughness' cannot be read: it holds Python objects"),
+])
+def test_unreadable_ground_truth(scene, tmp_path, capsys, content, reason):
+    copy = tmp_path / 'scene'
+    shutil.copytree(scene, copy)
+    path = copy / 'ground_truth.npz'
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    elif isinstance(content, dict):
+        np.savez(path, **content)
+    else:
+        with open(path, 'wb') as f:
+            np.save(f, content)
+    assert run(['svbrdf', str(copy), '--out', str(tmp_path / 'o'),
+                '--steps', '1']) == 2
+    err = one_line_error(capsys, f"'{path}' is not a readable .npz of the "
+                         f"ground truth ({reason}", 'delete or repair it')
+    assert 'pickle' not in err
+    assert not (tmp_path / 'o').exists()
+
+
+def test_ground_truth_folder(scene, tmp_path, capsys):
+    copy = tmp_path / 'scene'
+    shutil.copytree(scene, copy)
+    os.remove(copy / 'ground_truth.npz')
+    (copy / 'ground_truth.npz').mkdir()
+    assert run(['svbrdf', str(copy), '--out', str(tmp_path / 'o'),
+                '--steps', '1']) == 2
+    one_line_error(capsys, f"'{copy / 'ground_truth.npz'}' is a folder, not "
+                   f"a file")
+    assert not (tmp_path / 'o').exists()
+
+
+def test_nothing_to_fit(scene, tmp_path, capsys):
+    copy = tmp_path / 'scene'
+    shutil.copytree(scene, copy)
+    spec = json.loads((copy / 'cameras.json').read_text())
+    np.save(copy / 'black.npy', np.zeros((8, 16, 3), np.float32))
+    (copy / 'cameras.json').write_text(json.dumps(dict(spec,
+                                                       envmap='black.npy')))
+    assert run(['svbrdf', str(copy), '--out', str(tmp_path / 'o')]) == 2
+    one_line_error(capsys, f"'{copy / 'black.npy'}' is black")
+    # every pixel missing: said so, not "no camera sees any point"
+    for camera in spec['cameras']:
+        os.remove(copy / camera['image'])
+        camera['image'] = os.path.splitext(camera['image'])[0] + '.npy'
+        np.save(copy / camera['image'],
+                np.full((32, 32, 3), np.nan, np.float32))
+    (copy / 'cameras.json').write_text(json.dumps(spec))
+    assert run(['svbrdf', str(copy), '--out', str(tmp_path / 'o')]) == 2
+    one_line_error(capsys, f"no photograph listed in "
+                   f"'{copy / 'cameras.json'}' has a pixel above 0")
+    assert not (tmp_path / 'o').exists()

@@ -239,8 +239,10 @@ def test_nan_pixels_are_kept_for_projectviews(scene):
 def test_unreadable_or_ldr_format_photograph(scene):
     spec = load_cameras(scene)
     (scene / 'images' / '002.npy').write_bytes(b'not numpy')
-    with pytest.raises(ValueError, match=r"could not read '.*002.npy'"):
+    with pytest.raises(ValueError, match=r"could not read '.*002.npy': it "
+                       r"is not a NumPy .npy file") as info:
         read_scene(scene)
+    assert 'pickle' not in str(info.value)  # numpy's advice is not ours
     os.remove(scene / 'images' / '002.npy')
     (scene / 'images' / '002.png').write_bytes(b'\x89PNG')
     spec['cameras'][2]['image'] = 'images/002.png'
@@ -291,14 +293,14 @@ def test_geometry_and_envmap_files(scene):
     with pytest.raises(ValueError, match=r"holds no geometry .* file "
                        r"\(.obj/.off/.ply/.stl\)"):
         read_scene(scene)
-    write_ply(scene / 'geometry.ply', np.zeros((1, 3)) + [[0, 0, 1]])
+    write_ply(scene / 'geometry.ply', np.eye(3))
     np.save(scene / 'sky.npy', np.ones((8, 16, 3), np.float32))
     with pytest.raises(ValueError, match=r"several environment-map files: "
                        r"'envmap.npy', 'sky.npy'"):
         read_scene(scene)
     os.remove(scene / 'sky.npy')
     with pytest.raises(ValueError, match=r"geometry.ply' is a point cloud "
-                       r"of 1 point\(s\) without normals"):
+                       r"of 3 point\(s\) without normals"):
         read_scene(scene)
     (scene / 'geometry.ply').write_bytes(b'ply\nbroken')
     with pytest.raises(ValueError, match=r"could not read '.*geometry.ply'"):
@@ -322,3 +324,106 @@ def test_write_scene_checks_its_input(tmp_path):
     with pytest.raises(ValueError, match="image 1: 'image' has NaN"):
         write_scene(tmp_path, data, 'hdr')
     assert not (tmp_path / 'cameras.json').exists()
+
+
+# ----------------------------------------- folders and files in each other's
+# place, unreadable .npy files, nothing to fit: said as such
+def test_folder_where_a_file_belongs(scene):
+    spec = load_cameras(scene)
+    image = np.load(scene / 'images' / '002.npy')
+    os.remove(scene / 'images' / '002.npy')
+    (scene / 'images' / '002.npy').mkdir()
+    with pytest.raises(ValueError, match=r"camera 2 of .* lists the image "
+                       r"'images/002.npy', but '.*002.npy' is a folder, not "
+                       r"a file"):
+        read_scene(scene)
+    os.rmdir(scene / 'images' / '002.npy')
+    os.symlink(scene / 'gone.npy', scene / 'images' / '002.npy')
+    with pytest.raises(ValueError, match=r"002.npy' is a link to "
+                       r"'.*gone.npy', which does not exist"):
+        read_scene(scene)
+    os.remove(scene / 'images' / '002.npy')
+    np.save(scene / 'images' / '002.npy', image)
+    geometry = (scene / 'geometry.ply').read_bytes()
+    os.remove(scene / 'geometry.ply')
+    (scene / 'geometry.ply').mkdir()
+    with pytest.raises(ValueError, match=r"geometry file '.*geometry.ply' "
+                       r"named in cameras.json is a folder, not a file"):
+        read_scene(scene)
+    save_cameras(scene, spec['cameras'])  # looked for, not named
+    with pytest.raises(ValueError, match=r"holds no geometry .* file .* "
+                       r"\('geometry.ply' is a folder, not a file\)"):
+        read_scene(scene)
+    save_cameras(scene, spec)
+    os.rmdir(scene / 'geometry.ply')
+    (scene / 'geometry.ply').write_bytes(geometry)
+    os.remove(scene / 'envmap.npy')
+    (scene / 'envmap.npy').mkdir()
+    with pytest.raises(ValueError, match=r"environment map '.*envmap.npy' "
+                       r"named in cameras.json is a folder, not a file"):
+        read_scene(scene)
+    os.remove(scene / 'cameras.json')
+    (scene / 'cameras.json').mkdir()
+    with pytest.raises(ValueError, match=r"cameras.json' is a folder, not a "
+                       r"file"):
+        read_scene(scene)
+
+
+def test_file_where_the_image_folder_belongs(scene):
+    for name in os.listdir(scene / 'images'):
+        os.remove(scene / 'images' / name)
+    os.rmdir(scene / 'images')
+    (scene / 'images').write_text('x')
+    with pytest.raises(ValueError, match=r"'images/000.npy', but .* does "
+                       r"not exist: '.*images' is a file, not a folder"):
+        read_scene(scene)
+
+
+@pytest.mark.parametrize('content, message', [
+    (b'', r'it is empty'),
+    (b'\x00garbage', r'it is not a NumPy .npy file'),
+    (np.array([{'a': 1}], dtype=object), r'it holds Python objects'),
+    ({'a': np.ones(3)}, r'it is a .npz archive \(numpy.savez\), not one '
+     r'.npy array'),
+])
+def test_unreadable_npy_photograph_and_envmap(scene, content, message):
+    for name in ('images/001.npy', 'envmap.npy'):
+        path = scene / name
+        original = path.read_bytes()
+        if isinstance(content, bytes):
+            path.write_bytes(content)
+        elif isinstance(content, dict):
+            with open(path, 'wb') as f:
+                np.savez(f, **content)
+        else:
+            np.save(path, content, allow_pickle=True)
+        with pytest.raises(ValueError, match=r"could not read '.*"
+                           + name.split('/')[-1] + "': " + message) as info:
+            read_scene(scene)
+        assert 'allow_pickle' not in str(info.value)
+        path.write_bytes(original)
+
+
+def test_nothing_to_fit(scene):
+    np.save(scene / 'envmap.npy', np.zeros((8, 16, 3), np.float32))
+    with pytest.raises(ValueError, match=r"environment map '.*envmap.npy' "
+                       r"is black \(every pixel 0\): it lights nothing"):
+        read_scene(scene)
+    np.save(scene / 'envmap.npy', np.ones((8, 16, 3), np.float32))
+    for i, value in enumerate((0.0, np.nan, 0.0)):  # 0 or NaN, nothing else
+        np.save(scene / 'images' / f'00{i}.npy',
+                np.full((6, 8, 3), value, np.float32))
+    with pytest.raises(ValueError, match=r"no photograph listed in "
+                       r"'.*cameras.json' has a pixel above 0"):
+        read_scene(scene)
+    np.save(scene / 'images' / '002.npy', np.full((6, 8, 3), 0.5, np.float32))
+    assert read_scene(scene).images.shape == (3, 6, 8, 3)
+
+
+def test_scene_files(scene, tmp_path):
+    names = [os.path.relpath(p, scene)
+             for p in scene_module.scene_files(scene)]
+    assert names == ['cameras.json', 'geometry.ply', 'envmap.npy',
+                     'images/000.npy', 'images/001.npy', 'images/002.npy']
+    with pytest.raises(ValueError, match='does not exist'):
+        scene_module.scene_files(tmp_path / 'nowhere')

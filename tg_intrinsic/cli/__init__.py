@@ -82,8 +82,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         except KeyboardInterrupt:
             if args.debug:
                 raise
-            print(f"{prog}: interrupted; outputs written so far are "
-                  f"complete (every file is written atomically)",
+            print(f"{prog}: interrupted; no file was left half-written "
+                  f"and earlier results are as they were (train --resume "
+                  f"continues from the last checkpoint)",
                   file=sys.stderr)
             return 130
         except Exception as error:  # noqa: BLE001 - reported, not hidden

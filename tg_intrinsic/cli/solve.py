@@ -156,8 +156,8 @@ def run(args):
         raise UsageError(f"--ratio must be greater than 1 (each level keeps "
                          f"about 1/RATIO of the points), got {args.ratio:g}")
     quiet = args.quiet
-    out = args.out or os.path.join('runs', 'solve_' + os.path.splitext(
-        os.path.basename(args.mesh))[0])
+    out = args.out if args.out is not None else os.path.join(
+        'runs', 'solve_' + os.path.splitext(os.path.basename(args.mesh))[0])
     inputs = [args.mesh]
     if args.signal is not None:
         signal_file = args.signal.rpartition(':')[0] \

@@ -13,14 +13,18 @@ colours: the base colour sRGB-encoded, the others through the colormap of
 their figure; normals as nx ny nz), one PNG per map drawn on the surface
 with a colour bar, and report.json (points, views, observations per
 point, seconds per stage, losses, mean entropy, and errors against
-ground_truth.npz when the scene folder has one). Every file is written
-atomically."""
+ground_truth.npz when the scene folder has one). The files appear in
+--out together when all are written, replacing those of an earlier svbrdf
+run there: a failed run leaves --out as it was. --out may not hold the
+scene, and a folder holding files svbrdf did not write needs --overwrite
+(the same for --write-example DIR)."""
+import math
 import os
 import sys
 import time
 
 from .common import (UsageError, default_of, stage, nonnegative_float,
-                     nonnegative_int, output_folder, positive_int)
+                     nonnegative_int, positive_int)
 
 HELP = 'recover SVBRDF maps and their uncertainty from HDR photographs'
 
@@ -64,6 +68,25 @@ def _unit_float(text: str) -> float:
     return value
 
 
+def _l_max_type(samples: int):
+    """argparse type of --l-max: a degree whose (L + 1)^2 coefficients the
+    ``samples`` light directions per point can fit, 4 per coefficient (as
+    FitSphericalHarmonics requires)."""
+    import argparse
+    largest = math.isqrt(samples // 4) - 1
+
+    def l_max(text: str) -> int:
+        value = positive_int(text)
+        if value > largest:
+            raise argparse.ArgumentTypeError(
+                f"must be at most {largest}, got {text!r}: the light at each "
+                f"point is sampled in {samples} directions, and degree L has "
+                f"(L + 1)^2 coefficients that need 4 samples each")
+        return value
+    l_max.largest = largest
+    return l_max
+
+
 def add_arguments(parser):
     from tg_intrinsic.nn import FrequencySVBRDF
     from tg_intrinsic.transforms import FitSphericalHarmonics
@@ -71,11 +94,17 @@ def add_arguments(parser):
     solver = default_of(FrequencySVBRDF.fit, 'solver')
     tv_weight = default_of(FrequencySVBRDF.fit, 'tv_weight')
     l_max = default_of(FitSphericalHarmonics.__init__, 'l_max')
+    l_max_type = _l_max_type(default_of(FitSphericalHarmonics.__init__,
+                                        'num_light_samples'))
     parser.add_argument('scene', nargs='?', metavar='SCENE_DIR',
                         help='the scene folder (format below)')
     parser.add_argument('--out', default=None, metavar='DIR',
                         help='output folder (default: runs/svbrdf_<SCENE_DIR'
                         ' name>)')
+    parser.add_argument('--overwrite', action='store_true',
+                        help='write into --out (or --write-example DIR) even '
+                        'when it holds files that svbrdf did not write: '
+                        'those are kept, files of the same name replaced')
     parser.add_argument('--solver', choices=SOLVERS, default=solver,
                         help=f'adam: gradient descent on all points (the '
                         f'original\'s); lm: Levenberg-Marquardt per point, '
@@ -87,11 +116,12 @@ def add_arguments(parser):
                         '(default: ' + ', '.join(
                             f'{n} for {s}' for s, n in DEFAULT_STEPS.items())
                         + ', the library\'s)')
-    parser.add_argument('--l-max', type=positive_int, default=None,
+    parser.add_argument('--l-max', type=l_max_type, default=None,
                         metavar='L',
                         help=f'spherical-harmonic degree of the light and '
-                        f'the observations (default: {l_max} for eq5.11, '
-                        f'{SPLIT_SUM_L_MAX} for split_sum)')
+                        f'the observations, 1 to {l_max_type.largest} '
+                        f'(default: {l_max} for eq5.11, {SPLIT_SUM_L_MAX} '
+                        f'for split_sum)')
     parser.add_argument('--specular-model', choices=SPECULAR_MODELS,
                         default=SPECULAR_MODELS[0],
                         help='eq5.11: the paper\'s model; split_sum: '
@@ -167,6 +197,18 @@ def run(args):
             raise UsageError("give either SCENE_DIR (to recover maps) or "
                              "--write-example DIR (to write a scene), not "
                              "both")
+        # options of the recovery would be ignored without a word
+        given = [option for option, value in (
+            ('--out', args.out), ('--steps', args.steps),
+            ('--l-max', args.l_max), ('--metallic', args.metallic),
+            ('--refine', args.refine or None)) if value is not None]
+        if given:
+            one = len(given) == 1
+            raise UsageError(
+                f"{', '.join(given)} {'is' if one else 'are'} not used with "
+                f"--write-example DIR, which writes the scene into DIR and "
+                f"stops; drop {'it' if one else 'them'} and recover its maps "
+                f"afterwards with 'tg-intrinsic svbrdf DIR --out OUT'")
         return write_example(args)
     if any(option is not None for option in example_options):
         raise UsageError("--example-views, --example-image-size and "
@@ -184,32 +226,37 @@ def write_example(args) -> int:
     import numpy as np
     from tg_intrinsic.datasets import svbrdf_scene
     from tg_intrinsic.io import scene_summary, write_scene
+    from tg_intrinsic.io.results import result_folder
     from tg_intrinsic.io.scene import FORMAT, GROUND_TRUTH_FILE
     from tg_intrinsic.utils import atomic_write
 
-    folder = output_folder(args.write_example)
+    folder = args.write_example
     views = args.example_views or EXAMPLE_VIEWS
     size = args.example_image_size or EXAMPLE_IMAGE_SIZE
     subdivisions = EXAMPLE_SUBDIVISIONS if args.example_subdivisions is None \
         else args.example_subdivisions
-    if not args.quiet:
-        print(f"rendering a synthetic scene ({views} views of {size} x "
-              f"{size}) ...", file=sys.stderr, flush=True)
-    data = svbrdf_scene('sphere', num_views=views, image_size=(size, size),
-                        materials='metals', seed=args.seed,
-                        resolution=subdivisions)
-    write_scene(folder, data)
-    truth = {name: getattr(data, name).detach().cpu().numpy()
-             for name in ('base_color', 'metallic', 'roughness', 'pos')}
-    atomic_write(os.path.join(folder, GROUND_TRUTH_FILE),
-                 lambda f: np.savez(f, **truth), 'wb')
-    readme = ('A synthetic scene written by "tg-intrinsic svbrdf '
-              '--write-example" (tg_intrinsic.datasets.svbrdf_scene: '
-              f'metals under a sun and sky, seed {args.seed}).\n'
-              f'Recover its maps with: tg-intrinsic svbrdf {folder} --out '
-              f'OUT\n\n{FORMAT}\n')
-    atomic_write(os.path.join(folder, 'README.txt'),
-                 lambda f: f.write(readme), 'w')
+    # an earlier example is replaced whole; a user's files (a capture's
+    # cameras.json, photographs) only with --overwrite
+    with result_folder(folder, 'svbrdf-example', args.overwrite,
+                       option='--write-example') as staging:
+        if not args.quiet:
+            print(f"rendering a synthetic scene ({views} views of {size} x "
+                  f"{size}) ...", file=sys.stderr, flush=True)
+        data = svbrdf_scene('sphere', num_views=views,
+                            image_size=(size, size), materials='metals',
+                            seed=args.seed, resolution=subdivisions)
+        write_scene(staging, data)
+        truth = {name: getattr(data, name).detach().cpu().numpy()
+                 for name in ('base_color', 'metallic', 'roughness', 'pos')}
+        atomic_write(os.path.join(staging, GROUND_TRUTH_FILE),
+                     lambda f: np.savez(f, **truth), 'wb')
+        readme = ('A synthetic scene written by "tg-intrinsic svbrdf '
+                  '--write-example" (tg_intrinsic.datasets.svbrdf_scene: '
+                  f'metals under a sun and sky, seed {args.seed}).\n'
+                  f'Recover its maps with: tg-intrinsic svbrdf {folder} '
+                  f'--out OUT\n\n{FORMAT}\n')
+        atomic_write(os.path.join(staging, 'README.txt'),
+                     lambda f: f.write(readme), 'w')
     if not args.quiet:
         print(f"wrote {folder}: {scene_summary(data)}, with "
               f"{GROUND_TRUTH_FILE}\nnext: tg-intrinsic svbrdf {folder} "
@@ -220,17 +267,12 @@ def write_example(args) -> int:
 # ------------------------------------------------------------------ recovery
 def recover(args) -> int:
     """Reads the scene, recovers the maps and writes the outputs."""
-    import numpy as np
     import torch
 
-    import tg_intrinsic
-    from tg_intrinsic.io import read_scene, scene_summary
-    from tg_intrinsic.io.scene import GROUND_TRUTH_FILE
-    from tg_intrinsic.nn import FrequencySVBRDF
-    from tg_intrinsic.transforms import (FitSphericalHarmonics,
-                                         ProjectViews, SpectralUncertainty)
-    from tg_intrinsic.nn.frequency_svbrdf import DEFAULT_STEPS
-    from tg_intrinsic.utils import atomic_write_json
+    from tg_intrinsic.io import read_scene
+    from tg_intrinsic.io.results import check_output_path, result_folder
+    from tg_intrinsic.io.scene import GROUND_TRUTH_FILE, scene_files
+    from tg_intrinsic.transforms import FitSphericalHarmonics
 
     device = _device(args.device)
     dtype = getattr(torch, args.dtype)
@@ -239,16 +281,44 @@ def recover(args) -> int:
         else default_of(FitSphericalHarmonics.__init__, 'l_max'))
     scene = args.scene
     truth_path = os.path.join(scene, GROUND_TRUTH_FILE)
+    out = args.out if args.out is not None else os.path.join(
+        'runs', 'svbrdf_' + os.path.basename(os.path.normpath(
+            os.path.abspath(scene))))
+    check_output_path(out, [scene], '--out')  # before any work
     seconds = {}
     start = time.perf_counter()
     # read without a progress line: a bad scene is reported on one line
     data = read_scene(scene, dtype=dtype)
     truth = _read_ground_truth(truth_path, data.pos) \
-        if os.path.isfile(truth_path) else None
+        if os.path.lexists(truth_path) else None
     seconds['read'] = round(time.perf_counter() - start, 3)
-    out = output_folder(args.out or os.path.join(
-        'runs', 'svbrdf_' + os.path.basename(os.path.normpath(
-            os.path.abspath(scene)))))
+    # every file written goes to a staging folder, put in place only when
+    # all are written; --out may not hold the scene (--out SCENE/images)
+    with result_folder(out, 'svbrdf', args.overwrite,
+                       inputs=[scene, truth_path] + scene_files(scene)
+                       ) as staging:
+        report = _recover(args, data, truth, device, l_max, seconds, start,
+                          staging)
+    if not args.quiet:
+        _print_summary(out, report)
+    return 0
+
+
+def _recover(args, data, truth, device, l_max, seconds, start,
+             out) -> dict:
+    """Recovers the maps of the scene read into ``data`` and writes every
+    output into ``out`` (the staging folder); returns the report."""
+    import numpy as np
+
+    import tg_intrinsic
+    from tg_intrinsic.io import scene_summary
+    from tg_intrinsic.nn import FrequencySVBRDF
+    from tg_intrinsic.nn.frequency_svbrdf import DEFAULT_STEPS
+    from tg_intrinsic.transforms import (FitSphericalHarmonics,
+                                         ProjectViews, SpectralUncertainty)
+    from tg_intrinsic.utils import atomic_write_json
+
+    scene = args.scene
     if not args.quiet:
         print(f"read {scene}: {scene_summary(data)}", file=sys.stderr,
               flush=True)
@@ -314,19 +384,21 @@ def recover(args) -> int:
         'tg_intrinsic': tg_intrinsic.__version__,
     }
     atomic_write_json(os.path.join(out, 'report.json'), report)
-    if not args.quiet:
-        _print_summary(out, report)
-    return 0
+    return report
 
 
 def _read_ground_truth(path: str, pos) -> dict:
     import numpy as np
     num_points = pos.size(0)
-    try:
-        with np.load(path, allow_pickle=False) as f:
-            truth = {k: f[k] for k in f.files}
-    except (OSError, ValueError) as error:
-        raise ValueError(f"could not read '{path}': {error}") from None
+    if os.path.isdir(path):
+        raise ValueError(f"'{path}' is a folder, not a file: the optional "
+                         f"ground truth is a .npz file of base_color [N, 3],"
+                         f" roughness [N] and metallic [N]; move or rename "
+                         f"the folder")
+    truth, reason = _load_npz(path)
+    if reason is not None:
+        raise ValueError(f"'{path}' is not a readable .npz of the ground "
+                         f"truth ({reason}); delete or repair it")
     shapes = {'base_color': (num_points, 3), 'roughness': (num_points, ),
               'metallic': (num_points, )}
     for name, shape in shapes.items():
@@ -353,6 +425,51 @@ def _read_ground_truth(path: str, pos) -> dict:
                              f" geometry file (another mesh, or reordered "
                              f"vertices), so its maps cannot be compared")
     return truth
+
+
+def _load_npz(path: str):
+    """The arrays of numbers in a .npz file and :obj:`None`, or
+    :obj:`None` and why they cannot be read."""
+    import zipfile
+    import numpy as np
+    try:
+        archive = np.load(path, allow_pickle=False)
+    except EOFError:
+        return None, 'the file is empty'
+    except ValueError as error:
+        return None, _numpy_problem(error, '.npz file')
+    except zipfile.BadZipFile as error:
+        return None, f'a damaged archive: {error}'
+    except OSError as error:
+        return None, error.strerror or str(error)
+    if not isinstance(archive, np.lib.npyio.NpzFile):
+        return None, 'one .npy array, not a .npz archive of named maps'
+    truth = {}
+    with archive:
+        for name in archive.files:
+            try:
+                truth[name] = archive[name]
+            except ValueError as error:
+                return None, f"its '{name}' cannot be read: " + \
+                    _numpy_problem(error, '.npy array')
+            except (EOFError, OSError, zipfile.BadZipFile) as error:
+                return None, f"its '{name}' is damaged: {error}"
+            if not isinstance(truth[name], np.ndarray):  # raw bytes
+                return None, f"its '{name}' is not a .npy array"
+            if truth[name].dtype.kind not in 'biuf':
+                return None, f"its '{name}' holds {truth[name].dtype}, " \
+                    f"not numbers"
+    return truth, None
+
+
+def _numpy_problem(error: ValueError, what: str) -> str:
+    """numpy's reason for not loading a file, without its advice to load
+    pickles (which would run code from the file)."""
+    if 'pickled' in str(error):
+        return f'it is not a NumPy {what}'
+    if 'Object arrays' in str(error):
+        return 'it holds Python objects, not numbers'
+    return str(error).rstrip('.')
 
 
 def _errors(maps: dict, truth: dict) -> dict:

@@ -16,6 +16,7 @@ mantissa, so a round trip is accurate to half a step.
 import os
 import re
 import warnings
+import zipfile
 
 import numpy as np
 import torch
@@ -469,11 +470,42 @@ def looks_clipped(image) -> bool:
     return at_max >= max(4, 0.01 * num_valid)
 
 
+def read_npy(path) -> np.ndarray:
+    """The array of numbers in a ``.npy`` file (:func:`numpy.save`).
+
+    Raises a :class:`ValueError` that names the file and what is wrong
+    with it: numpy's own message for a file that is not ``.npy`` offers to
+    unpickle it, which would run code from the file.
+    """
+    path = os.fspath(path)
+    try:
+        array = np.load(path, allow_pickle=False)
+    except EOFError:
+        reason = 'it is empty'
+    except ValueError as error:
+        message = str(error)
+        if 'pickled' in message:
+            reason = 'it is not a NumPy .npy file'
+        elif 'Object arrays' in message:
+            reason = 'it holds Python objects, not numbers'
+        else:  # a damaged header or data cut short
+            reason = f'it is damaged ({message.rstrip(".")})'
+    except zipfile.BadZipFile as error:
+        reason = f'it is a damaged .npz archive ({error})'
+    else:
+        if not isinstance(array, np.lib.npyio.NpzFile):
+            return array
+        array.close()
+        reason = 'it is a .npz archive (numpy.savez), not one .npy array'
+    raise ValueError(f"could not read '{path}': {reason}; write it with "
+                     f"numpy.save")
+
+
 def read_envmap(path) -> torch.Tensor:
     r"""Reads an equirectangular environment map (``.hdr``/``.pic``,
     ``.exr`` or ``.npy``) as a float32 tensor :math:`(H, W, 3)` in the
-    convention of :mod:`tg_intrinsic.geometry.appearance.envmap` (row 0 looks up,
-    :math:`+z`), validated by
+    convention of :mod:`tg_intrinsic.geometry.appearance.envmap` (row 0 looks
+    up, :math:`+z`), validated by
     :func:`~tg_intrinsic.geometry.appearance.envmap.check_envmap`.
 
     Warns with a :class:`UserWarning` when the map
@@ -491,7 +523,7 @@ def read_envmap(path) -> torch.Tensor:
     elif extension == '.exr':
         image = read_exr(path)
     elif extension == '.npy':
-        image = np.load(path, allow_pickle=False)
+        image = read_npy(path)
         if not np.issubdtype(image.dtype, np.floating):
             raise ValueError(f"'{path}' holds {image.dtype}, not "
                              f"floating-point radiance")

@@ -25,11 +25,25 @@ _PREVIOUS = '.previous-'
 
 def check_output_path(path: str, inputs: Iterable[str] = (),
                       option: str = '--out') -> None:
-    """Raises a :class:`ValueError` naming ``option`` when ``path`` is an
-    existing file, or is (or holds) one of ``inputs``, which writing the
-    results there would replace or delete."""
+    """Raises a :class:`ValueError` naming ``option`` when ``path`` is
+    empty (an unset shell variable, not the current folder), an existing
+    file, cannot be created (a file where a folder above it belongs, a
+    folder that is not writable), or is (or holds) one of ``inputs``,
+    which writing the results there would replace or delete."""
+    if not str(path).strip():
+        raise ValueError(f"{option} is empty; give a folder")
     if os.path.exists(path) and not os.path.isdir(path):
         raise ValueError(f"{option} '{path}' is a file; give a folder")
+    parent = os.path.dirname(os.path.abspath(path))
+    while not os.path.exists(parent):
+        parent = os.path.dirname(parent)
+    if not os.path.isdir(parent):
+        raise ValueError(f"{option} '{path}' cannot be created: '{parent}' "
+                         f"is a file, not a folder; give another {option}")
+    if not os.access(parent, os.W_OK):
+        raise ValueError(f"{option} '{path}' cannot be written: the folder "
+                         f"'{parent}' is not writable; give another "
+                         f"{option}")
     folder = os.path.realpath(path)
     for source in inputs:
         if source is None:

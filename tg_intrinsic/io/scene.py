@@ -6,8 +6,8 @@ lighting, linear HDR photographs and their calibrated cameras, which
 (Wiersma et al., SIGGRAPH 2025) and ``tg-intrinsic svbrdf``.
 
 Cameras follow the OpenCV convention of
-:mod:`tg_intrinsic.geometry.appearance.cameras`: :math:`x_c = R x + t` maps a world
-point to camera coordinates, the camera looks along :math:`+z_c` with
+:mod:`tg_intrinsic.geometry.appearance.cameras`: :math:`x_c = R x + t` maps a
+world point to camera coordinates, the camera looks along :math:`+z_c` with
 :math:`x_c` right and :math:`y_c` down in the image, and
 :math:`(u, v) = (f_x x_c / z_c + c_x, f_y y_c / z_c + c_y)` in pixels
 where pixel (row :math:`i`, column :math:`j`) covers
@@ -15,8 +15,8 @@ where pixel (row :math:`i`, column :math:`j`) covers
 :math:`(j + \frac12, i + \frac12)`. (OpenCV and COLMAP put pixel centres
 at integers: add 0.5 to their :math:`c_x, c_y`.) The environment map is
 equirectangular with world :math:`z` up, as in
-:mod:`tg_intrinsic.geometry.appearance.envmap`. All radiance is linear: 8-bit or
-tone-mapped photographs are not HDR.
+:mod:`tg_intrinsic.geometry.appearance.envmap`. All radiance is linear: 8-bit
+or tone-mapped photographs are not HDR.
 
 The format (:data:`FORMAT`, also shown by ``tg-intrinsic svbrdf --help``):
 """
@@ -33,10 +33,12 @@ from torch_geometric.data import Data
 
 from tg_intrinsic.utils import atomic_write, atomic_write_file
 
-from .hdr import looks_clipped, read_envmap, read_exr, read_hdr, write_hdr
+from .hdr import (looks_clipped, read_envmap, read_exr, read_hdr, read_npy,
+                  write_hdr)
 from .mesh import MESH_EXTENSIONS, read_surface, write_ply
 
-__all__ = ['FORMAT', 'read_scene', 'write_scene', 'scene_summary']
+__all__ = ['FORMAT', 'read_scene', 'write_scene', 'scene_summary',
+           'scene_files']
 
 FORMAT = r"""SCENE/
   cameras.json       the cameras, and which file is each photograph (required)
@@ -125,28 +127,16 @@ def read_scene(folder, dtype: torch.dtype = torch.float32) -> Data:
             matrix, an R that is not a rotation), a listed photograph that
             is missing or an unlisted one beside them, photographs of
             different sizes, without 3 channels, not floating point, or
-            with infinite or negative radiance, an environment map of the
-            wrong shape, no geometry file or several candidates.
+            with infinite or negative radiance, no photograph with a pixel
+            above 0, an environment map of the wrong shape or black
+            everywhere, no geometry file or several candidates, and a
+            folder where a file belongs.
     """
     if dtype not in (torch.float32, torch.float64):
         raise ValueError(f"'dtype' must be torch.float32 or torch.float64, "
                          f"got {dtype}")
     folder = os.fspath(folder)
-    if not osp.exists(folder):
-        raise ValueError(f"the scene folder '{folder}' does not exist")
-    if not osp.isdir(folder):
-        raise ValueError(f"'{folder}' is a file, not a scene folder (a "
-                         f"folder with {CAMERAS_FILE}, the geometry, the "
-                         f"environment map and the photographs)")
-    spec = _read_cameras_json(folder)
-    files = [camera['image'] for camera in spec['cameras']]
-    _check_image_folders(folder, files)
-    geometry = spec['geometry'] or _find_single(
-        folder, MESH_EXTENSIONS, set(), 'geometry',
-        'geometry (mesh or point cloud)')
-    envmap_file = spec['envmap'] or _find_single(
-        folder, ('.hdr', '.pic', '.exr', '.npy'), set(files), 'envmap',
-        'environment-map')
+    spec, files, geometry, envmap_file = _locate(folder)
     pos, face, normal = _read_geometry(folder, geometry)
     envmap = _read_envmap(folder, envmap_file)
     images = _read_images(folder, files)
@@ -163,14 +153,69 @@ def read_scene(folder, dtype: torch.dtype = torch.float32) -> Data:
     return data
 
 
+def scene_files(folder) -> List[str]:
+    """The files :func:`read_scene` reads from a scene folder:
+    cameras.json, the geometry, the environment map and the photographs
+    (which may lie outside the folder). Raises the same errors for a
+    malformed folder."""
+    folder = os.fspath(folder)
+    spec, files, geometry, envmap = _locate(folder)
+    return [osp.join(folder, CAMERAS_FILE), _resolve(folder, geometry),
+            _resolve(folder, envmap)] + [_resolve(folder, n) for n in files]
+
+
+def _locate(folder: str):
+    """The checked cameras.json, the listed photographs, the geometry
+    file and the environment-map file of a scene folder."""
+    if not osp.exists(folder):
+        raise ValueError(f"the scene folder '{folder}' does not exist")
+    if not osp.isdir(folder):
+        raise ValueError(f"'{folder}' is a file, not a scene folder (a "
+                         f"folder with {CAMERAS_FILE}, the geometry, the "
+                         f"environment map and the photographs)")
+    spec = _read_cameras_json(folder)
+    files = [camera['image'] for camera in spec['cameras']]
+    _check_image_folders(folder, files)
+    geometry = spec['geometry'] or _find_single(
+        folder, MESH_EXTENSIONS, set(), 'geometry',
+        'geometry (mesh or point cloud)')
+    envmap = spec['envmap'] or _find_single(
+        folder, ('.hdr', '.pic', '.exr', '.npy'), set(files), 'envmap',
+        'environment-map')
+    return spec, files, geometry, envmap
+
+
 def _resolve(folder: str, name: str) -> str:
     return name if osp.isabs(name) else osp.join(folder, name)
+
+
+def _why_not_a_file(path: str) -> Optional[str]:
+    """Why ``path`` is no file to read (to end a sentence that begins
+    with it), or :obj:`None` when it is one."""
+    if osp.isfile(path):
+        return None
+    if osp.isdir(path):
+        return 'is a folder, not a file'
+    if osp.islink(path):
+        return f"is a link to '{os.readlink(path)}', which does not exist"
+    parent = osp.dirname(osp.abspath(path))
+    while not osp.exists(parent) and osp.dirname(parent) != parent:
+        parent = osp.dirname(parent)
+    if osp.exists(parent) and not osp.isdir(parent):
+        return f"does not exist: '{parent}' is a file, not a folder"
+    return 'does not exist'
 
 
 def _read_cameras_json(folder: str) -> dict:
     """The parsed, checked cameras.json: ``{'cameras': [{'image', 'K',
     'R', 't'}], 'geometry': name or None, 'envmap': name or None}``."""
     path = osp.join(folder, CAMERAS_FILE)
+    if osp.isdir(path):
+        raise ValueError(f"'{path}' is a folder, not a file: a scene folder "
+                         f"needs the file {CAMERAS_FILE} listing every "
+                         f"photograph with its camera (K, R, t); run "
+                         f"'tg-intrinsic svbrdf --write-example DIR' to see "
+                         f"the format")
     if not osp.isfile(path):
         raise ValueError(f"'{folder}' has no {CAMERAS_FILE}: a scene folder "
                          f"needs one listing every photograph with its "
@@ -272,10 +317,11 @@ def _check_image_folders(folder: str, files: List[str]):
     listed = {}
     for i, name in enumerate(files):
         path = _resolve(folder, name)
-        if not osp.isfile(path):
+        why = _why_not_a_file(path)
+        if why:
             raise ValueError(f"camera {i} of '{osp.join(folder, CAMERAS_FILE)}"
-                             f"' lists the image '{name}', but '{path}' does "
-                             f"not exist")
+                             f"' lists the image '{name}', but '{path}' "
+                             f"{why}")
         parent = osp.realpath(osp.dirname(osp.abspath(path)))
         listed.setdefault(parent, set()).add(osp.basename(path))
     top = osp.realpath(folder)
@@ -306,7 +352,7 @@ def _read_image(path: str) -> np.ndarray:
         elif extension == '.exr':
             image = read_exr(path)
         elif extension == '.npy':
-            image = np.load(path, allow_pickle=False)
+            image = read_npy(path)
         else:
             ldr = f" (8-bit {extension} photographs are not HDR)" \
                 if extension in LDR_EXTENSIONS else ''
@@ -350,6 +396,12 @@ def _read_images(folder: str, files: List[str]) -> torch.Tensor:
         if looks_clipped(image):
             clipped.append(name)
         images.append(image)
+    if not any(bool((image > 0).any()) for image in images):
+        raise ValueError(f"no photograph listed in "
+                         f"'{osp.join(folder, CAMERAS_FILE)}' has a pixel "
+                         f"above 0 (all are 0, or NaN for missing), so there "
+                         f"is no light to fit; export them as linear HDR "
+                         f"radiance")
     if clipped:
         shown = ', '.join(f"'{n}'" for n in clipped[:3])
         warnings.warn(f"{len(clipped)} of {len(files)} photographs look "
@@ -373,9 +425,14 @@ def _find_single(folder: str, extensions, exclude: set, key: str,
                    and osp.join(top, n) not in excluded)
     kinds = '/'.join(e for e in extensions if e != '.pic')
     if not found:
-        raise ValueError(f"'{folder}' holds no {what} file ({kinds}) and "
-                         f"{CAMERAS_FILE} names none; add one, or name it "
-                         f"as \"{key}\" in {CAMERAS_FILE}")
+        folders = sorted(n for n in os.listdir(folder)
+                         if _is_candidate(n, extensions)
+                         and osp.isdir(osp.join(folder, n)))
+        also = f" ('{folders[0]}' is a folder, not a file)" if folders \
+            else ''
+        raise ValueError(f"'{folder}' holds no {what} file ({kinds}){also} "
+                         f"and {CAMERAS_FILE} names none; add one, or name "
+                         f"it as \"{key}\" in {CAMERAS_FILE}")
     if len(found) > 1:
         shown = ', '.join(f"'{n}'" for n in found[:4])
         raise ValueError(f"'{folder}' holds several {what} files: "
@@ -387,9 +444,10 @@ def _find_single(folder: str, extensions, exclude: set, key: str,
 def _read_geometry(folder: str, name: str):
     from tg_intrinsic.geometry import estimate_normals, vertex_normals
     path = _resolve(folder, name)
-    if not osp.isfile(path):
+    why = _why_not_a_file(path)
+    if why:
         raise ValueError(f"the geometry file '{path}' named in "
-                         f"{CAMERAS_FILE} does not exist")
+                         f"{CAMERAS_FILE} {why}")
     try:
         pos, face, properties = read_surface(path)
     except FileNotFoundError as error:
@@ -428,9 +486,10 @@ def _read_geometry(folder: str, name: str):
 
 def _read_envmap(folder: str, name: str) -> torch.Tensor:
     path = _resolve(folder, name)
-    if not osp.isfile(path):
+    why = _why_not_a_file(path)
+    if why:
         raise ValueError(f"the environment map '{path}' named in "
-                         f"{CAMERAS_FILE} does not exist")
+                         f"{CAMERAS_FILE} {why}")
     try:
         envmap = read_envmap(path)
     except ImportError as error:
@@ -439,6 +498,11 @@ def _read_envmap(folder: str, name: str) -> torch.Tensor:
         if path in str(error):
             raise
         raise ValueError(f"environment map '{path}': {error}") from None
+    if not bool((envmap > 0).any()):
+        raise ValueError(f"the environment map '{path}' is black (every "
+                         f"pixel 0): it lights nothing, so no material can "
+                         f"be recovered; give the lighting the photographs "
+                         f"were taken under")
     height, width = envmap.shape[:2]
     if width != 2 * height:
         warnings.warn(f"the environment map '{path}' is {height} x {width}; "
@@ -644,4 +708,3 @@ def scene_summary(data: Data) -> str:
         ' (point cloud)')
     return (f"{surface}; {views} view(s) of {height} x {width}; "
             f"environment map {data.envmap.size(0)} x {data.envmap.size(1)}")
-

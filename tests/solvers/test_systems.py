@@ -169,7 +169,6 @@ def test_extreme_scales_with_scaled_weights(scale):
     # smoothed signal is the same at every scale, and the Poisson solution
     # (S x = M y: x scales like the area) is the same up to the area
     data = small_data(channels=1)
-    area = float(stiffness_and_mass(data)[1].sum())
     scaled = data.clone()
     scaled.pos = data.pos * scale
     for solve, weight, power, out_power in ((smooth, 1e-2, 2, 0),
@@ -302,5 +301,15 @@ def test_conformal_flow_bad_input():
             conformal_flow(data, step=step)
     with pytest.raises(ValueError, match='steps'):
         conformal_flow(data, step=0.1, steps=0)
-    with pytest.raises(ValueError, match="'step' depends on the scale"):
+    with pytest.raises(ValueError,
+                       match=r"'step' = 0.1 is too large .*rescale"):
         conformal_flow(Data(pos=data.pos * 1e-8, face=data.face), step=0.1)
+
+
+def test_a_point_cloud_too_small_for_the_robust_laplacian():
+    data = Data(pos=torch.randn(30, 3, dtype=torch.float64))
+    with pytest.raises(ValueError, match=r"point cloud of 30 points is too "
+                                         r"small .* at least 31 points"):
+        stiffness_and_mass(data)
+    data.pos = torch.randn(31, 3, dtype=torch.float64)
+    assert stiffness_and_mass(data)[0].shape == (31, 31)

@@ -88,9 +88,12 @@ def read_surface(path: str, weld: bool = True, return_inverse: bool = False
                 np.asarray(faces, dtype=np.int64).reshape(-1, 3)
             if ext == '.ply':
                 properties = _ply_vertex_properties(loaded, len(pos))
+                _check_ply_counts(path, len(pos), 0 if face is None
+                                  else len(face))
     except (OSError, ValueError, IndexError, KeyError, TypeError,
             AttributeError) as error:
-        raise ValueError(f"could not read '{path}': "
+        raise ValueError(f"could not read '{path}' as {ext[1:].upper()} (is "
+                         f"it truncated, or of another format?): "
                          f"{type(error).__name__}: {error}") from error
     if pos.ndim != 2 or pos.shape[1] != 3 or len(pos) == 0:
         raise ValueError(f"'{path}' has no vertices")
@@ -212,6 +215,26 @@ def _first_repeating_face_line(path: str, ext: str
             if len(set(int(c) for c in corners)) < len(corners):
                 return number, text
     return None
+
+
+def _check_ply_counts(path: str, vertices: int, triangles: int):
+    """A truncated PLY file reads as fewer vertices or faces than its
+    header announces (trimesh does not complain): a :class:`ValueError`."""
+    announced = {}
+    with open(path, 'rb') as f:
+        for raw in f:
+            words = raw.decode('ascii', 'replace').split()
+            if words[:1] == ['end_header']:
+                break
+            if words[:1] == ['element'] and len(words) == 3:
+                announced[words[1]] = int(words[2])
+    vertex, face = announced.get('vertex', 0), announced.get('face', 0)
+    # polygons become several triangles, so fewer triangles than faces
+    # means some are missing
+    if vertices != vertex or triangles < face:
+        raise ValueError(f"its header announces {vertex} vertices and {face} "
+                         f"faces but it holds {vertices} vertices and "
+                         f"{triangles} triangles: the file is truncated")
 
 
 def _ply_vertex_properties(loaded, num_vertices: int

@@ -54,7 +54,14 @@ def stiffness_and_mass(data, robust: Optional[bool] = None
                           "package: pip install robust-laplacian") from error
     p = pos.detach().double().cpu().numpy()
     if face is None:
-        S, M = robust_laplacian.point_cloud_laplacian(p)
+        if len(p) <= POINT_CLOUD_NEIGHBOURS:
+            raise ValueError(
+                f"a point cloud of {len(p)} points is too small for the "
+                f"robust Laplacian, which connects every point to its "
+                f"{POINT_CLOUD_NEIGHBOURS} nearest neighbours; give at least "
+                f"{POINT_CLOUD_NEIGHBOURS + 1} points, or a triangle mesh")
+        S, M = robust_laplacian.point_cloud_laplacian(
+            p, n_neighbors=POINT_CLOUD_NEIGHBOURS)
     else:
         S, M = robust_laplacian.mesh_laplacian(p, face.t().cpu().numpy())
     return sp.csr_matrix(S), M.diagonal()
@@ -92,6 +99,10 @@ def _solve(data, matrix, mass, y, solver, tol, ratio, lower_bound, cycle,
     return torch.from_numpy(out.reshape(values.shape)).to(y.dtype).to(
         y.device)
 
+
+# Neighbours of every point in the robust Laplacian of a point cloud (the
+# package's default)
+POINT_CLOUD_NEIGHBOURS = 30
 
 # Rounding leaves S's row sums at ~1e-16 of its entries: a mass term below
 # this share of the stiffness cannot be told from a singular matrix.

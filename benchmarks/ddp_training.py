@@ -69,7 +69,7 @@ def launch(model, processes, threads, root, out, extra=(), quick=False,
            device='cpu'):
     """Runs one configuration; returns its timings and final scores."""
     argv = MODELS[model] + (QUICK[model] if quick else []) + COMMON + [
-        '--root', root, '--out', out, '--threads', str(threads),
+        '--root', root, '--out', out, '--overwrite', '--threads', str(threads),
         '--device', device, *extra]
     if processes == 1:
         command = [sys.executable, '-m', 'tg_intrinsic.train'] + argv

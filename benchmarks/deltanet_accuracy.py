@@ -80,7 +80,7 @@ def main():
             channels = base if vector else wide
             name = f"{dataset}_{'vector' if vector else 'scalar_only'}"
             argv = ['--dataset', dataset, '--root', args.root,
-                    '--out', os.path.join(args.runs, name),
+                    '--out', os.path.join(args.runs, name), '--overwrite',
                     '--num-points', str(args.num_points),
                     '--epochs', str(epochs), '--batch-size', '16',
                     '--eval-every', str(max(1, epochs // 10)), '--quiet',

@@ -55,6 +55,7 @@ def main():
                     '--dataset', 'synthetic_shrec', '--root', args.root,
                     '--num-vertices', '300', '500',
                     '--out', os.path.join(args.runs, f'{task}_M{order}'),
+                    '--overwrite',
                     '--epochs', str(args.epochs), '--batch-size', '8',
                     '--optimizer', 'adam', '--lr', '1e-2', '--lr-min', '1e-4',
                     '--schedule', 'cosine', '--weight-decay', '1e-4',

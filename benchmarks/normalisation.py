@@ -128,7 +128,8 @@ def main():
         for norm in ('batch', 'instance', 'none'):
             out = os.path.join(args.runs, f'hsn_{norm}_{seed}')
             run = score(HSN + common + ['--hsn-norm', norm, '--seed',
-                                        str(seed), '--out', out],
+                                        str(seed), '--out', out,
+                                        '--overwrite'],
                         f'hsn {norm} seed {seed}',
                         recalibrate_in_training=norm != 'batch')
             run.update(model='hsn', norm=norm, seed=seed)
@@ -137,7 +138,8 @@ def main():
     for epochs in DELTANET_EPOCHS:
         out = os.path.join(args.runs, f'deltanet_{epochs}_{seed}')
         run = score(DELTANET + common + ['--epochs', str(epochs), '--seed',
-                                         str(seed), '--out', out],
+                                         str(seed), '--out', out,
+                                         '--overwrite'],
                     f'deltanet {epochs} epochs seed {seed}',
                     recalibrate_in_training=False)
         run.update(model='deltanet', norm='batch', seed=seed)

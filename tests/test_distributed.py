@@ -104,7 +104,7 @@ def _scenarios(rank, world_size, folder, ports):
                      f'{folder}/fresh'],
             'per_rank': ['--epochs', '1'],
             'resumed_1_to_2': ['--sync-batch-norm', '--epochs', '2',
-                               '--resume']}
+                               '--resume', '--allow-changes', 'epochs']}
     for (name, extra), port in zip(runs.items(), ports):
         os.environ['MASTER_PORT'] = str(port)
         stdout = sys.stdout
@@ -195,14 +195,14 @@ def test_two_processes_train_as_one(tmp_path):
     # ... and with one from two processes' checkpoint
     shutil.copytree(tmp_path / 'sync', tmp_path / 'resumed_2_to_1')
     metrics = single('resumed_2_to_1', '--epochs', '2', '--resume',
-                     '--sync-batch-norm')
+                     '--allow-changes', 'epochs', '--sync-batch-norm')
     assert [h['epoch'] for h in metrics['history']] == [1, 2]
     assert_close_runs(weights(tmp_path / 'resumed_2_to_1'), straight,
                       1e-3)
     # only rank 0 wrote and printed
     assert sorted(os.listdir(tmp_path / 'sync')) == [
-        'checkpoint.pt', 'learning_curve.png', 'metrics.csv',
-        'metrics.json']
+        '.tg-intrinsic.json', 'checkpoint.pt', 'learning_curve.png',
+        'metrics.csv', 'metrics.json']
     assert (tmp_path / 'calls.1.txt').read_text() == ''
     assert (tmp_path / 'sync.1.txt').read_text() == ''
     assert 'final test accuracy' in (tmp_path / 'sync.0.txt').read_text()

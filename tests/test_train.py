@@ -52,8 +52,10 @@ def test_training_writes_outputs_and_resumes(tmp_path):
     assert metrics['final_test_accuracy'] == rescored_accuracy(metrics)
     state = torch.load(out / 'checkpoint.pt', weights_only=False)
     assert state['epoch'] == 2
-    # Resuming continues from the checkpoint instead of starting over.
-    metrics = run(tmp_path, '--epochs', '3', '--resume')
+    # Resuming continues from the checkpoint instead of starting over (a
+    # longer run: a change of setting --allow-changes lets through).
+    metrics = run(tmp_path, '--epochs', '3', '--resume', '--allow-changes',
+                  'epochs')
     assert [h['epoch'] for h in metrics['history']] == [1, 2, 3]
     assert json.loads((out / 'metrics.json').read_text())[
         'final_test_accuracy'] == metrics['final_test_accuracy']
@@ -89,14 +91,16 @@ def test_run_removes_temporaries_of_an_interrupted_write(tmp_path,
     out.mkdir()
     (out / '.tmp-k2j4h8checkpoint.pt').write_bytes(b'half a checkpoint')
     (out / 'notes.txt').write_text('not ours')
-    run(tmp_path, '--epochs', '1', root=modelnet_root)
+    run(tmp_path, '--epochs', '1', '--overwrite', root=modelnet_root)
     assert 'removed 1 temporary file(s) of an interrupted write' in \
         capsys.readouterr().out
     assert not [f for f in os.listdir(out) if f.startswith('.tmp')]
     assert (out / 'notes.txt').read_text() == 'not ours'
     # ... and when it resumes there
     (out / '.tmp-x1y2z3metrics.csv').write_text('epoch,train_loss\n1,')
-    run(tmp_path, '--epochs', '2', '--resume', root=modelnet_root)
+    run(tmp_path, '--epochs', '2', '--resume', '--allow-changes', 'epochs',
+        root=modelnet_root)
+    assert (out / 'notes.txt').read_text() == 'not ours'
     assert not [f for f in os.listdir(out) if f.startswith('.tmp')]
 
 
@@ -194,8 +198,8 @@ def test_resuming_an_old_checkpoint(tmp_path, modelnet_root, recwarn):
     assert 'rng' not in state and state['world_size'] == 1
     state['rng'] = {'torch': torch.get_rng_state()}
     torch.save(state, path)
-    metrics = run(tmp_path, '--epochs', '2', '--resume', *RANDOM,
-                  root=modelnet_root)
+    metrics = run(tmp_path, '--epochs', '2', '--resume', '--allow-changes',
+                  'epochs', *RANDOM, root=modelnet_root)
     assert [h['epoch'] for h in metrics['history']] == [1, 2]
     assert not [w for w in recwarn if 'generator' in str(w.message)]
 
@@ -447,20 +451,24 @@ def test_hsn_eval_mode_scores_what_training_learned(tmp_path,
 
 
 def test_resuming_an_hsn_checkpoint_of_another_normalisation(
-        tmp_path, small_shrec_root):
+        tmp_path, small_shrec_root, monkeypatch):
     # checkpoints written before --hsn-norm existed hold batch norm
-    # statistics; resuming one into the per-mesh default is refused with
-    # the flag that loads it
+    # statistics; resuming one into the per-mesh default is refused, with
+    # the value that loads it, before the data are prepared
     args = HSN_SHREC + ['--root', str(small_shrec_root), '--out',
-                        str(tmp_path / 'run'), '--eval-every', '1']
-    main(args + ['--epochs', '1', '--hsn-norm', 'batch'])
+                        str(tmp_path / 'run'), '--eval-every', '1',
+                        '--allow-changes', 'epochs']
+    main(args[:-2] + ['--epochs', '1', '--hsn-norm', 'batch'])
     path = tmp_path / 'run' / 'checkpoint.pt'
     state = torch.load(path, weights_only=False)
     del state['args']['hsn_norm']
     torch.save(state, path)
-    with pytest.raises(ValueError, match='was trained with --hsn-norm '
-                       'batch; resume it with --hsn-norm batch'):
-        main(args + ['--epochs', '2', '--resume'])
+    with monkeypatch.context() as patch:
+        patch.setattr(train_module, 'build_mesh_datasets', None)  # unused
+        with pytest.raises(ValueError, match='trained with other settings: '
+                           '--hsn-norm batch -> instance; --hsn-norm cannot '
+                           'change when resuming'):
+            main(args + ['--epochs', '2', '--resume'])
     metrics = main(args + ['--epochs', '2', '--resume', '--hsn-norm',
                            'batch'])
     assert [h['epoch'] for h in metrics['history']] == [1, 2]

@@ -21,9 +21,30 @@ transport. Rotations, uniform scales and translations keep both valid;
 a per-axis scale makes DeltaNet rebuild its operators for every batch.
 
 Writes to ``--out``: ``checkpoint.pt`` (model, optimiser, schedule, history
-and the random number generators' states; written atomically at every
-evaluation, so ``--resume`` continues an interrupted run), ``metrics.json``,
-``metrics.csv`` (one row per epoch) and ``learning_curve.png``.
+and the settings; written atomically at every evaluation, so ``--resume``
+continues an interrupted run), ``metrics.json``, ``metrics.csv`` (one row
+per epoch) and ``learning_curve.png``, and records them there
+(:mod:`tg_intrinsic.io.results`). Before any data is prepared, the output
+folder is checked: it may not be, or be inside, the data set folder; it
+may hold files that ``train`` did not write only with ``--overwrite``
+(they are kept); and a new run does not start over an earlier one there
+unless ``--overwrite``, which deletes the earlier run's files first, so
+the folder never mixes two runs.
+
+``--resume`` continues from ``checkpoint.pt`` (or, when there is none,
+says so and starts a new run at epoch 1, so a job script can always pass
+it). The checkpoint must be readable and of the same model and task, and
+the settings must be the checkpoint's: a run resumed with other values
+would not be the run the checkpoint continues (the optimiser's state even
+keeps the old ``--lr``). The check names every setting that differs.
+``--allow-changes epochs,eval-every`` lets the settings that change how
+the run goes on, not what the checkpoint holds, differ: ``--epochs``,
+``--eval-every``, ``--sync-batch-norm`` and the path of the data set
+folder (``--dataset`` or ``--mesh-root``, e.g. after moving it). Settings
+that do not change what is computed (``--quiet``, ``--workers``,
+``--threads``, ``--device``, ``--backend``, ``--on-disk``, ``--root``)
+may always differ, and so may those the model or data set does not use.
+A setting an older checkpoint did not save is not checked.
 
 Evaluation reports what inference on the checkpoint gives: the test
 scores are taken in eval mode (``model.eval()``) on the weights saved
@@ -78,7 +99,7 @@ import math
 import os
 import random
 import time
-from typing import Dict, List, Optional
+from typing import Callable, Dict, List, Optional
 
 import numpy as np
 import torch
@@ -89,7 +110,10 @@ from torch_geometric.transforms import Compose, NormalizeScale, RandomScale
 from tqdm import tqdm
 
 from tg_intrinsic import distributed
+from tg_intrinsic.cli.common import UsageError, one_line
 from tg_intrinsic.io.figures import save_figure
+from tg_intrinsic.io.results import (RECORD, check_output_path, claim_folder,
+                                     recorded_files, write_record)
 from tg_intrinsic.nn.harmonic_resnet_block import (COMPLEX_NORMS,
                                                    DEFAULT_COMPLEX_NORM)
 from tg_intrinsic.nn.recalibrate_batch_norm import (batch_norms,
@@ -157,7 +181,7 @@ def source_splits(args):
     if args.dataset in clouds:
         cls, counts = clouds[args.dataset]
         kwargs = dict(num_points=args.num_points, seed=args.data_seed,
-                      workers=args.workers)
+                      workers=args.workers, log=not args.quiet)
         if args.shapes_per_class is not None:
             half = max(1, args.shapes_per_class // 2)
             kwargs[counts] = (half, half)
@@ -165,7 +189,7 @@ def source_splits(args):
         return [cls(path, split, **kwargs) for split in ('train', 'test')]
     if args.dataset == 'synthetic_shrec':
         kwargs = dict(seed=args.data_seed, task=args.task,
-                      workers=args.workers)
+                      workers=args.workers, log=not args.quiet)
         if args.num_vertices is not None:
             kwargs['num_vertices'] = tuple(args.num_vertices)
         if args.shapes_per_class is not None:
@@ -177,9 +201,20 @@ def source_splits(args):
                 for split in ('train', 'test')]
     if args.mesh_root is None:
         raise ValueError("--dataset mesh_folder needs --mesh-root PATH")
-    return [open_folder(args.mesh_root, split, task=args.task,
-                        force_reload=args.force_reload)
+    sets = [open_folder(args.mesh_root, split, task=args.task,
+                        force_reload=args.force_reload, log=not args.quiet)
             for split in ('train', 'test')]
+    count = sets[0].num_classes
+    if args.task == 'classification' and count < 2:
+        # one class: every prediction is right, nothing is learnt
+        names = getattr(sets[0], 'classes', None) or []
+        found = f" ({', '.join(names)})" if names else ''
+        raise UsageError(
+            f"the data set folder '{args.mesh_root}' holds {count} "
+            f"class{'' if count == 1 else 'es'}{found}: classification "
+            f"needs at least 2, one folder per class; add another class, "
+            f"or use --task segmentation if the shapes carry part labels")
+    return sets
 
 
 def select_per_class(labels: List[int], per_class: int, seed: int
@@ -385,7 +420,18 @@ class _Pipeline:
         return repr(self.pipeline)
 
 
-def build_point_sets(args):
+def _check_num_classes(source, num_classes: Optional[int]) -> None:
+    """Raises a :class:`UsageError` when a checkpoint to resume, trained on
+    ``num_classes`` classes, does not fit the data set ``source``."""
+    if num_classes is not None and source.num_classes != num_classes:
+        raise UsageError(
+            f"the checkpoint in --out was trained on {num_classes} classes, "
+            f"but the data set has {source.num_classes}; resume it on its "
+            f"data, or start a new run with --overwrite (without --resume) "
+            f"or in another --out")
+
+
+def build_point_sets(args, num_classes: Optional[int] = None):
     """DeltaNet's train and test examples: :obj:`args.num_points` points
     per shape with unit normals, in the unit sphere, with the MLS operators
     (k neighbours, regulariser) attached. Meshes are sampled by
@@ -394,8 +440,11 @@ def build_point_sets(args):
     from its triangle's nearest corner. Point clouds with more points keep
     their farthest-point subset; without normals they are estimated.
     Cached under ``root/deltanet_cache`` (prepared by ``args.workers``
-    processes; stored on disk with ``args.on_disk``)."""
+    processes; stored on disk with ``args.on_disk``). With
+    :obj:`num_classes` (a checkpoint's), data of another number of classes
+    are refused before they are prepared."""
     sets = source_splits(args)
+    _check_num_classes(sets[0], num_classes)
     prepare = _PreparePoints(args.num_points, args.k, args.regularizer,
                              args.data_seed, args.task)
     cache = _cache_path(args, 'deltanet', sets,
@@ -407,12 +456,15 @@ def build_point_sets(args):
     return train_items, test_items, sets[0]
 
 
-def build_mesh_datasets(args):
+def build_mesh_datasets(args, num_classes: Optional[int] = None):
     """HSN's train and test examples: every mesh precomputed by
     :func:`hsn_pipeline` (the vertices are the points), cached under
     ``root/hsn_cache`` (prepared by ``args.workers`` processes; stored on
-    disk with ``args.on_disk``)."""
+    disk with ``args.on_disk``). With :obj:`num_classes` (a checkpoint's),
+    data of another number of classes are refused before they are
+    prepared."""
     sets = source_splits(args)
+    _check_num_classes(sets[0], num_classes)
     pipeline = hsn_pipeline(args.radius, args.rings, args.max_order,
                             args.logmap_method, args.resample_vertices)
     cache = _cache_path(args, 'hsn', sets,
@@ -606,18 +658,296 @@ def seed_everything(seed: int) -> None:
     random.seed(seed)
 
 
+# The files a run writes into --out (see the module docstring).
+CHECKPOINT = 'checkpoint.pt'
+OUTPUT_FILES = (CHECKPOINT, 'metrics.json', 'metrics.csv',
+                'learning_curve.png')
+# Settings that do not change what a run computes: a resumed run may
+# always give other values.
+RESUME_FREE = ('quiet', 'workers', 'threads', 'device', 'backend', 'on_disk',
+               'force_reload', 'root', 'out', 'resume', 'allow_changes',
+               'overwrite', 'debug', 'command')
+# Settings that change how a resumed run goes on but not what its
+# checkpoint holds: they may differ with --allow-changes.
+RESUME_CHANGEABLE = ('epochs', 'eval_every', 'sync_batch_norm', 'mesh_root')
+DELTANET_ONLY = ('num_points', 'k', 'regularizer', 'conv_channels',
+                 'mlp_depth', 'embedding_size', 'no_vector_stream',
+                 'dropout')
+HSN_ONLY = ('hsn_channels', 'max_order', 'rings', 'hsn_norm', 'radius',
+            'resample_vertices', 'logmap_method')
+# The value of a setting that older checkpoints lack but that is known:
+# before --hsn-norm, HSN trained with batch norm.
+OLD_DEFAULTS = {'hsn': {'hsn_norm': 'batch'}}
+
+
+def _option(name: str, args) -> str:
+    """The command-line option of the setting ``name``."""
+    if name == 'mesh_root' and getattr(args, 'command', None) == 'train':
+        return '--dataset'  # tg-intrinsic train names the folder so
+    return '--' + name.replace('_', '-')
+
+
+def _shown(value) -> str:
+    if isinstance(value, bool):
+        return 'on' if value else 'off'
+    if isinstance(value, (list, tuple)):
+        return ' '.join(str(v) for v in value)
+    return 'none' if value is None else str(value)
+
+
+def allowed_changes(text: str) -> List[str]:
+    """The settings ``--allow-changes`` names (comma-separated option names,
+    with or without the dashes) as ``args`` attributes; a
+    :class:`ValueError` for a setting a resumed run cannot change."""
+    names = []
+    for word in filter(None, (w.strip() for w in text.split(','))):
+        name = word.lstrip('-').replace('-', '_')
+        name = 'mesh_root' if name == 'dataset' else name
+        if name not in RESUME_CHANGEABLE + RESUME_FREE:
+            shown = ', '.join(n.replace('_', '-') for n in
+                              RESUME_CHANGEABLE[:-1]) + ' or dataset'
+            raise ValueError(
+                f"--allow-changes {word}: only {shown} (the folder's path) "
+                f"may change when resuming; the other settings are part of "
+                f"what the checkpoint holds, so start a new run to change "
+                f"them")
+        names.append(name)
+    return names
+
+
+def resume_changes(args, saved: Dict, saved_world: int = 1) -> List[str]:
+    """The settings of ``args`` that differ from ``saved`` (a checkpoint's
+    ``args``) and matter to the run: not those in :data:`RESUME_FREE`,
+    those the model, data set or schedule do not use, nor those the
+    checkpoint does not know (older versions saved fewer)."""
+    ignored = set(RESUME_FREE)
+    ignored.update(HSN_ONLY if args.model == 'deltanet' else DELTANET_ONLY)
+    ignored.update(['lr_min'] if args.schedule == 'step'
+                   else ['milestones', 'gamma'])
+    if args.task != 'classification':
+        ignored.add('train_per_class')
+    if args.dataset != 'synthetic_shrec':
+        ignored.add('num_vertices')
+    if args.dataset == 'mesh_folder':
+        ignored.add('shapes_per_class')
+    if min(saved_world, distributed.launched_world_size()) == 1:
+        ignored.add('sync_batch_norm')  # one process: nothing to sync
+    changed = []
+    for name, value in vars(args).items():
+        if name in ignored or name not in saved:
+            continue
+        old = saved[name]
+        old, value = [list(v) if isinstance(v, tuple) else v
+                      for v in (old, value)]
+        if name == 'mesh_root' and None not in (old, value) and \
+                os.path.realpath(old) == os.path.realpath(value):
+            continue
+        if old != value:
+            changed.append(name)
+    return changed
+
+
+def check_resume(args, state: Dict, path: str) -> List[str]:
+    """Raises a :class:`UsageError` unless the checkpoint ``state`` (read
+    from ``path``) was trained with the model, task and settings of
+    ``args``, but for the settings ``args.allow_changes`` lets change;
+    returns those changes as ``--option old -> new`` texts."""
+    saved = {**OLD_DEFAULTS.get(args.model, {}), **(state.get('args') or {})}
+    restart = ("start a new run with --overwrite (without --resume; it "
+               "replaces the checkpoint) or in another --out")
+    model, task = saved.get('model'), saved.get('task')
+    if (model is not None and model != args.model) or \
+            (task is not None and task != args.task):
+        was = ' '.join(str(w) for w in (model or args.model, task) if w)
+        raise UsageError(f"'{path}' holds a {was} model, not {args.model} "
+                         f"{args.task}; resume it as {was}, or {restart}")
+    changed = resume_changes(args, saved, state.get('world_size', 1))
+
+    def listed(names):
+        return ', '.join(f"{_option(n, args)} {_shown(saved[n])} -> "
+                         f"{_shown(getattr(args, n))}" for n in names)
+    refused = [n for n in changed if n not in args.allow_changes]
+    if refused:
+        need_flag = [n for n in refused if n in RESUME_CHANGEABLE]
+        flag = '--allow-changes ' + ','.join(
+            _option(n, args)[2:] for n in need_flag)
+        fixed = [_option(n, args) for n in refused if n not in need_flag]
+        if not fixed:
+            advice = (f"add {flag} to go on with the new values, or resume "
+                      f"with the checkpoint's")
+        else:
+            also = ', '.join(_option(n, args) for n in need_flag)
+            advice = (f"{', '.join(fixed)} cannot change when resuming: "
+                      f"resume with the checkpoint's values"
+                      + (f" (and {flag} for {also})" if need_flag else '')
+                      + f", or {restart}")
+        raise UsageError(f"'{path}' was trained with other settings: "
+                         f"{listed(refused)}; {advice}")
+    return [listed([n]) for n in changed]
+
+
+def read_checkpoint(path: str) -> Dict:
+    """The training state saved in ``path``; a :class:`UsageError` when it
+    is not a readable checkpoint of a run of this module."""
+    restart = ("start a new run with --overwrite (without --resume; it "
+               "replaces the file) or in another --out")
+    try:
+        state = torch.load(path, map_location='cpu', weights_only=False)
+    except OSError:
+        raise
+    except Exception as error:  # noqa: BLE001 - whatever unpickling raises
+        raise UsageError(f"'{path}' is not a readable checkpoint "
+                         f"(truncated?); {restart}") from error
+    if not isinstance(state, dict) or not {
+            'model', 'optimizer', 'schedule', 'history', 'epoch'} <= set(
+                state):
+        raise UsageError(f"'{path}' is not a checkpoint of tg-intrinsic "
+                         f"train (it holds no model, optimiser, schedule "
+                         f"and epoch); {restart}")
+    return state
+
+
+def _earlier_run(out: str, files: List[str]) -> str:
+    """Why a new run does not start in ``out``, which holds ``files`` of
+    an earlier one."""
+    if CHECKPOINT not in files:
+        return (f"--out '{out}' holds an earlier run that saved no "
+                f"checkpoint ({', '.join(files)}); --overwrite starts over "
+                f"(deleting it), or give another --out")
+    try:
+        epoch = read_checkpoint(os.path.join(out, CHECKPOINT))['epoch']
+    except ValueError:
+        return (f"--out '{out}' holds an earlier run with an unreadable "
+                f"checkpoint; --overwrite starts over (deleting it), or "
+                f"give another --out")
+    return (f"--out '{out}' holds an earlier run (checkpoint at epoch "
+            f"{epoch}); --resume continues it, --overwrite starts over "
+            f"(deleting it), or give another --out")
+
+
+def claim_output(args) -> Optional[Dict]:
+    """Checks the output folder ``args.out`` before any data is read and
+    returns the checkpoint to resume (:obj:`None` for a new run): the rules
+    of :mod:`tg_intrinsic.io.results` (no input in it, no files another
+    command wrote unless ``args.overwrite``), and with ``args.resume`` a
+    readable checkpoint of the same model, task and settings
+    (:func:`check_resume`). A new run does not start over an earlier one
+    unless ``args.overwrite``, which then deletes the earlier run's files.
+    Records that ``train`` writes there (:func:`~tg_intrinsic.io.results.
+    write_record`) and removes the temporary files of killed writes."""
+    out = args.out
+    inputs = [args.mesh_root] if getattr(args, 'mesh_root', None) else []
+    check_output_path(out, inputs, '--out')
+    for source in inputs:
+        # a folder data set would read the run's files as data
+        real = os.path.realpath(source)
+        if os.path.realpath(out).startswith(real + os.sep):
+            raise UsageError(f"--out '{out}' is inside the data set folder "
+                             f"'{source}', which would read the run's "
+                             f"files as data; give an --out outside it")
+    path = os.path.join(out, CHECKPOINT)
+    own = recorded_files(out, 'train')
+    if own is None and os.path.isfile(path) and not os.path.exists(
+            os.path.join(out, RECORD)):
+        # a run of a version that kept no record: these are its files
+        own = {name for name in OUTPUT_FILES
+               if os.path.exists(os.path.join(out, name))}
+    # left by a run killed while writing a checkpoint or metrics
+    leftovers = [] if own is None else remove_temporaries(out)
+    state = None
+    if args.resume and os.path.exists(path):
+        state = read_checkpoint(path)
+        changes = check_resume(args, state, path)
+        # the files beside the run's were allowed when it started
+        claim_folder(out, 'train', args.overwrite or (
+            own is not None and CHECKPOINT in own), inputs)
+        if changes:
+            print(f"resuming with changed settings: {', '.join(changes)}")
+    else:
+        earlier = sorted(name for name in own or ()
+                         if os.path.isfile(os.path.join(out, name)))
+        if earlier and not args.overwrite:
+            raise UsageError(_earlier_run(out, earlier))
+        claim_folder(out, 'train', args.overwrite, inputs)
+        for name in earlier:  # the folder never mixes two runs
+            os.remove(os.path.join(out, name))
+        own = set()
+        if args.resume:
+            print(f"no checkpoint in {out}: starting a new run at epoch 1")
+    if os.path.isdir(out):  # else made with the run's first file
+        leftovers += remove_temporaries(out)
+        write_record(out, 'train', own or ())
+    if leftovers:
+        print(f"removed {len(leftovers)} temporary file(s) of an "
+              f"interrupted write from {out}: {', '.join(leftovers)}")
+    return state
+
+
+def _from_rank_zero(fn: Callable):
+    """``fn()`` on rank 0 and its result on every process; a failure there
+    fails every process (a user mistake as a :class:`UsageError`)."""
+    if distributed.world_size() == 1:
+        return fn()
+    if distributed.rank() == 0:
+        try:
+            result = fn()
+        except BaseException as error:
+            distributed.broadcast_object(
+                (False, f'{type(error).__name__}: {error}',
+                 isinstance(error, ValueError), str(error)))
+            raise
+        distributed.broadcast_object((True, result))
+        return result
+    reply = distributed.broadcast_object(None)
+    if reply[0]:
+        return reply[1]
+    if reply[2]:
+        raise UsageError(reply[3])
+    raise RuntimeError(f"rank 0 failed while checking --out: {reply[1]}")
+
+
+def lone_shape_batches(model: str, batch_size: int, world: int = 1,
+                       length: Optional[int] = None) -> Optional[str]:
+    """Why ``model``'s batch norm over shapes (DeltaNet's head) cannot
+    train on batches of ``batch_size`` (the global batch over ``world``
+    processes) of a training set of ``length`` shapes, or :obj:`None`."""
+    if model != 'deltanet':
+        return None  # HSN normalises over vertices
+    per_process = f" per process (the batch is split over {world})" \
+        if world > 1 else ''
+    need = ("DeltaNet's batch norm normalises over the shapes of a batch "
+            f"and needs at least 2 shapes in every batch{per_process}")
+    if batch_size // world < 2:
+        return (f"--batch-size {batch_size}: {need}; use --batch-size "
+                f"{2 * world} or more")
+    # The epochs drop the remainder of the training set (see
+    # distributed.global_batches), so no batch is smaller than the others
+    # unless the whole set is smaller than one batch.
+    if length is not None and 0 < length < batch_size and \
+            length // world < 2:
+        return (f"the training set has {length} shape(s), fewer than "
+                f"--batch-size {batch_size}, so they make one batch; {need}:"
+                f" add training shapes" +
+                (" or use fewer processes" if world > 1 else ''))
+    return None
+
+
 def train(args) -> Dict:
     """Trains as :obj:`args` say (see the module docstring), on one
     process or, under ``torchrun``, on every process of the run."""
     device, started = distributed.start(args.backend, args.device)
     try:
-        return _train(args, device)
+        # before the data are prepared (minutes): rank 0 checks --out and
+        # reads the checkpoint, which every process then gets (no shared
+        # file system needed)
+        state = _from_rank_zero(lambda: claim_output(args))
+        return _train(args, device, state)
     finally:
         if started:
             distributed.stop()
 
 
-def _train(args, device) -> Dict:
+def _train(args, device, state: Optional[Dict]) -> Dict:
     rank, world = distributed.rank(), distributed.world_size()
     main_process = rank == 0
 
@@ -633,8 +963,9 @@ def _train(args, device) -> Dict:
     if not main_process:   # no progress bars beside rank 0's
         args = argparse.Namespace(**{**vars(args), 'quiet': True})
     # rank 0 prepares (and caches) the inputs, the others then read them
+    classes = None if state is None else state.get('num_classes')
     train_items, test_items, source = distributed.rank_zero_first(
-        lambda: build(args))
+        lambda: build(args, classes))
     num_classes = source.num_classes
     part_mask = getattr(source, 'part_mask', None)
     if args.train_per_class is not None and args.task == 'classification':
@@ -642,6 +973,13 @@ def _train(args, device) -> Dict:
         train_items = [train_items[i] for i in select_per_class(
             labels, args.train_per_class, args.data_seed)]
     train_set = _Mapped(train_items, augmentation(args), args.seed)
+    if args.task == 'classification' or part_mask is not None:
+        # per-shape features (DeltaNet's head, its category embedding)
+        # pass through batch norm
+        problem = lone_shape_batches(args.model, args.batch_size, world,
+                                     len(train_set))
+        if problem:
+            raise UsageError(problem)
     # Seeded again: whether the inputs were prepared now or read from the
     # cache must not change what follows.
     seed_everything(args.seed)
@@ -664,38 +1002,35 @@ def _train(args, device) -> Dict:
     else:
         schedule = torch.optim.lr_scheduler.MultiStepLR(
             optimizer, milestones=args.milestones, gamma=args.gamma)
-    checkpoint_path = os.path.join(args.out, 'checkpoint.pt')
-    state = None
-    if main_process:
-        os.makedirs(args.out, exist_ok=True)
-        # Left by a run killed while writing a checkpoint or metrics.
-        leftovers = remove_temporaries(args.out)
-        if leftovers:
-            say(f"removed {len(leftovers)} temporary file(s) of an "
-                f"interrupted write from {args.out}: "
-                f"{', '.join(leftovers)}")
-        if args.resume and os.path.exists(checkpoint_path):
-            state = torch.load(checkpoint_path, map_location='cpu',
-                               weights_only=False)
-    # rank 0's checkpoint on every process (no shared file system needed)
-    state = distributed.broadcast_object(state)
+    checkpoint_path = os.path.join(args.out, CHECKPOINT)
+    # the files this run wrote into --out, recorded before each is written
+    written = (recorded_files(args.out, 'train') or set()) \
+        if main_process else set()
+
+    def mark_written(name):
+        if name not in written:
+            written.add(name)
+            write_record(args.out, 'train', written)
+
     history: List[Dict] = []
     start_epoch = 1
-    if state is not None and args.model == 'hsn':
-        # checkpoints from before --hsn-norm were trained with batch norm
-        saved = state.get('args', {}).get('hsn_norm', 'batch')
-        if saved != args.hsn_norm:
-            raise ValueError(f"{checkpoint_path} was trained with "
-                             f"--hsn-norm {saved}; resume it with "
-                             f"--hsn-norm {saved}, or start a new run in "
-                             f"another --out")
     if state is not None:
         # Written by any number of processes: the batches and random draws
         # of an epoch depend on (seed, epoch) only, so the generators'
         # states that older versions saved ('rng') are not needed.
-        model.load_state_dict(state['model'])
-        optimizer.load_state_dict(state['optimizer'])
-        schedule.load_state_dict(state['schedule'])
+        try:
+            model.load_state_dict(state['model'])
+            optimizer.load_state_dict(state['optimizer'])
+            schedule.load_state_dict(state['schedule'])
+        except (RuntimeError, ValueError, KeyError) as error:
+            # a checkpoint of an older version, which saved fewer settings
+            # (and not the number of classes) than are checked now
+            raise UsageError(f"'{checkpoint_path}' does not fit the model "
+                             f"of these settings ({one_line(error)[:200]});"
+                             f" resume it with the settings and data it was "
+                             f"trained with, or start a new run with "
+                             f"--overwrite (without --resume) or in another "
+                             f"--out") from error
         history = state['history']
         start_epoch = state['epoch'] + 1
         say(f"resuming from epoch {state['epoch']} of {checkpoint_path}")
@@ -738,31 +1073,37 @@ def _train(args, device) -> Dict:
                                       args.seed, epoch, rank, world)))
         net.train()
         totals = torch.zeros(3, dtype=torch.float64, device=device)
-        bar = tqdm(train_loader, desc=f'epoch {epoch}/{args.epochs}',
-                   leave=False, disable=quiet)
-        for batch in bar:
-            batch = batch.to(device)
-            optimizer.zero_grad()
-            out = net(batch)
-            target = batch.y.view(-1)
-            loss_sum = F.cross_entropy(out, target, reduction='sum',
-                                       label_smoothing=args.label_smoothing)
-            # [count, loss sum, correct] of the global batch
-            step = distributed.all_reduce_sum(torch.stack([
-                torch.tensor(float(target.numel()), dtype=torch.float64,
-                             device=device),
-                loss_sum.detach().double(),
-                (out.argmax(-1) == target).sum().double()]))
-            if not torch.isfinite(step[1]):
-                raise RuntimeError(f"the training loss became "
-                                   f"{float(step[1])} in epoch {epoch}; "
-                                   f"lower --lr")
-            # the mean over the global batch: DDP averages the gradients
-            # over the processes, so each one scales its sum by world / n
-            (loss_sum * (world / float(step[0]))).backward()
-            optimizer.step()
-            totals += step
-            bar.set_postfix(loss=f'{float(totals[1] / totals[0]):.3f}')
+        # closed (and cleared) before an error propagates, so that the
+        # error is printed on a line of its own
+        with tqdm(train_loader, desc=f'epoch {epoch}/{args.epochs}',
+                  leave=False, disable=quiet) as bar:
+            for batch in bar:
+                batch = batch.to(device)
+                optimizer.zero_grad()
+                out = net(batch)
+                target = batch.y.view(-1)
+                loss_sum = F.cross_entropy(
+                    out, target, reduction='sum',
+                    label_smoothing=args.label_smoothing)
+                # [count, loss sum, correct] of the global batch
+                step = distributed.all_reduce_sum(torch.stack([
+                    torch.tensor(float(target.numel()), dtype=torch.float64,
+                                 device=device),
+                    loss_sum.detach().double(),
+                    (out.argmax(-1) == target).sum().double()]))
+                if not torch.isfinite(step[1]):
+                    # the settings diverge: the user's to change
+                    raise UsageError(f"the training loss became "
+                                     f"{float(step[1])} in epoch {epoch}; "
+                                     f"lower --lr (the checkpoint of the "
+                                     f"last evaluation is kept)")
+                # the mean over the global batch: DDP averages the
+                # gradients over the processes, so each one scales its sum
+                # by world / n
+                (loss_sum * (world / float(step[0]))).backward()
+                optimizer.step()
+                totals += step
+                bar.set_postfix(loss=f'{float(totals[1] / totals[0]):.3f}')
         schedule.step()
         seen = max(float(totals[0]), 1.0)
         record = {'epoch': epoch, 'train_loss': float(totals[1]) / seen,
@@ -794,18 +1135,22 @@ def _train(args, device) -> Dict:
         history.append(record)
         if not main_process:
             continue
+        mark_written('metrics.csv')
         write_metrics_csv(history, os.path.join(args.out, 'metrics.csv'))
         if record['test_accuracy'] is not None:
             say(f"epoch {epoch}: loss {record['train_loss']:.3f}, "
                 f"train {record['train_accuracy']:.3f}, "
                 f"test {record['test_accuracy']:.3f}"
                 + statistics_gap(record))
+            mark_written(CHECKPOINT)
             atomic_torch_save({'model': model.state_dict(),
                                'optimizer': optimizer.state_dict(),
                                'schedule': schedule.state_dict(),
                                'history': history, 'epoch': epoch,
                                'world_size': world,
+                               'num_classes': num_classes,
                                'args': vars(args)}, checkpoint_path)
+            mark_written('learning_curve.png')
             plot_history(history, os.path.join(args.out,
                                                'learning_curve.png'),
                          f'{args.model} on {args.dataset}')
@@ -824,6 +1169,7 @@ def _train(args, device) -> Dict:
                'world_size': world,
                'history': history, 'args': vars(args)}
     if main_process:
+        mark_written('metrics.json')
         atomic_write_json(os.path.join(args.out, 'metrics.json'), metrics)
         say(f"final test accuracy: {final:.3f} (written to {args.out})")
     return metrics
@@ -879,7 +1225,14 @@ def add_arguments(parser, model_and_dataset: bool = True):
     add('--root', default='data',
         help='cache folder of the synthetic data sets and prepared inputs')
     add('--out', default=None,
-        help='output folder (default: runs/<model>_<dataset>)')
+        help='output folder (default: runs/<model>_<dataset>); a new run '
+        'does not start over an earlier one there, nor beside files train '
+        'did not write, unless --overwrite')
+    add('--overwrite', action='store_true',
+        help='start a new run in --out over an earlier one (deleting its '
+        'checkpoint and metrics first), and write beside files train did '
+        'not write (they are kept); with --resume and a checkpoint there, '
+        'the run continues')
     add('--force-reload', action='store_true',
         help='re-read the files of a folder data set')
     add('--num-points', type=int, default=None,
@@ -951,11 +1304,21 @@ def add_arguments(parser, model_and_dataset: bool = True):
     add('--data-seed', type=int, default=0,
         help='seeds the synthetic data, the point sampling and the '
         'per-class training split')
-    add('--device', default='auto')
+    add('--device', default='auto',
+        help='auto (cuda when PyTorch finds a GPU, else cpu), cpu, cuda, '
+        'cuda:N or mps (default: auto)')
     add('--threads', type=int, default=0)
     add('--resume', action='store_true',
         help='continue from the checkpoint in --out (written by any number '
-        'of processes)')
+        'of processes) with the settings it was trained with, checked '
+        'before the data are prepared; without a checkpoint there, start '
+        'a new run at epoch 1')
+    add('--allow-changes', default='', metavar='NAMES',
+        help='with --resume: let these settings differ from the '
+        "checkpoint's, comma-separated: epochs, eval-every, "
+        'sync-batch-norm, dataset (a moved folder); a cosine schedule '
+        "keeps the checkpoint's length. --quiet, --workers, --threads, "
+        '--device, --backend, --on-disk, --root may always differ')
     add('--dropout', type=float, default=None,
         help="DeltaNet: dropout of the head (default: the model's, 0.5)")
     add('--backend', default='auto', choices=list(distributed.BACKENDS),
@@ -994,6 +1357,19 @@ def check_arguments(args, parser):
                      f"{args.dataset}; supported: {combos}")
     if args.out is None:
         args.out = os.path.join('runs', f'{args.model}_{args.dataset}')
+    for name, value in (('mesh_root', None), ('overwrite', False),
+                        ('allow_changes', '')):
+        if not hasattr(args, name):  # arguments built by hand
+            setattr(args, name, value)
+    try:
+        args.allow_changes = allowed_changes(args.allow_changes) \
+            if isinstance(args.allow_changes, str) else \
+            list(args.allow_changes)
+        distributed.check_device(args.device, '--device')
+    except ValueError as error:
+        parser.error(str(error))
+    if args.allow_changes and not args.resume:
+        parser.error("--allow-changes applies when resuming; add --resume")
     for name in ('num_points', 'epochs', 'batch_size', 'eval_every', 'k',
                  'rings', 'mlp_depth', 'embedding_size'):
         if getattr(args, name) < 1:
@@ -1018,6 +1394,11 @@ def check_arguments(args, parser):
         parser.error(f"--batch-size {args.batch_size} is the global batch, "
                      f"split evenly over the {world} processes: make it a "
                      f"multiple of {world}")
+    if args.task == 'classification' or args.dataset == 'synthetic_parts':
+        # batch norm over per-shape features (with the part categories)
+        problem = lone_shape_batches(args.model, args.batch_size, world)
+        if problem:
+            parser.error(problem)
     if args.resample_vertices == 0:
         args.resample_vertices = None
     for name in ('shapes_per_class', 'train_per_class', 'resample_vertices'):

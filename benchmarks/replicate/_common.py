@@ -382,7 +382,8 @@ def run(row: Row, argv: Optional[Sequence[str]] = None,
     runs, seconds = [], 0.0
     for r in range(repeats):
         argv_r = common + ['--data-seed', str(r), '--seed', str(r),
-                           '--out', osp.join(out, f'run_{r}')] + extra
+                           '--out', osp.join(out, f'run_{r}'),
+                           '--overwrite'] + extra  # a rerun starts over
         print(f"--- repeat {r + 1}/{repeats} (seed {r})")
         started = time.perf_counter()
         metrics = train(argv_r)

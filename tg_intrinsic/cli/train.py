@@ -2,7 +2,17 @@
 Surface Network (on the mesh vertices) on a synthetic data set or on a
 folder of your own meshes, with a progress bar, evaluation every few
 epochs, an atomic checkpoint that --resume continues from, metrics.json,
-metrics.csv (one row per epoch) and learning_curve.png in --out."""
+metrics.csv (one row per epoch) and learning_curve.png in --out.
+
+--resume checks, before any data is prepared, that the checkpoint in --out
+is readable and was trained with the same model, task and settings, and
+names each setting that differs; --allow-changes epochs,eval-every (also
+sync-batch-norm, dataset: a moved folder) lets those go on with new values,
+while --quiet, --workers, --threads, --device, --backend, --on-disk and
+--root may always differ. Without a checkpoint in --out, --resume says so
+and starts a new run at epoch 1. A new run does not start over an earlier
+one in --out, nor beside files train did not write, unless --overwrite
+(which deletes the earlier run's files first and keeps the others)."""
 import os
 
 HELP = ('train DeltaNet or HSN with a paper protocol on a synthetic data set '
@@ -14,6 +24,8 @@ EXAMPLE = """examples:
   tg-intrinsic train hsn --task segmentation --dataset path/to/human_seg
       # MeshCNN's layout: train/, test/, seg/*.eseg
   tg-intrinsic train deltanet --dataset synthetic-shrec --resume --out runs/x
+  tg-intrinsic train hsn --resume --out runs/y --allow-changes epochs \\
+      --epochs 200       # continue runs/y up to epoch 200 (started with fewer)
   tg-intrinsic train deltanet --task segmentation --dataset synthetic-parts
       # generated ShapeNet-Part-style parts (5 categories, 16 parts)
 

@@ -37,6 +37,11 @@ from tg_intrinsic.utils import atomic_write_json, machine_info  # noqa: E402
 
 RESULTS = os.path.join(os.path.dirname(__file__), 'results',
                        'cli_sweep.json')
+# the generated training data, shared by the cases (a cache, not a file of
+# the user's): '{data}' in a case
+DATA = os.path.join(tempfile.gettempdir(), 'tg-intrinsic-sweep-data')
+TINY_TRAINING = ['--epochs', '1', '--num-points', '64', '--shapes-per-class',
+                 '2', '--batch-size', '4', '--quiet', '--root', DATA]
 
 
 # ---------------------------------------------------------------- files
@@ -127,10 +132,25 @@ def make_files(root: str):
         assert main(['precompute', 'mls', os.path.join(root, 'meshes'),
                      os.path.join(root, 'cache'), '--k', '3',
                      '--quiet']) == 0
+        assert main(['train', 'deltanet', '--out', os.path.join(
+            root, 'run')] + TINY_TRAINING) == 0
+        assert main(['train', 'deltanet', '--out', os.path.join(
+            root, 'truncated')] + TINY_TRAINING) == 0
         assert main(['svbrdf', '--write-example',
                      os.path.join(root, 'scene'), '--example-views', '4',
                      '--example-image-size', '16',
                      '--example-subdivisions', '1', '--quiet']) == 0
+
+    checkpoint = os.path.join(root, 'truncated', 'checkpoint.pt')
+    with open(checkpoint, 'rb') as f:
+        half = f.read()[:1000]
+    with open(checkpoint, 'wb') as f:
+        f.write(half)
+    for split in ('train', 'test'):  # a folder of one class
+        os.makedirs(os.path.join(root, 'one_class', 'ball', split))
+        for k in range(2):
+            trimesh.creation.icosphere(1).export(os.path.join(
+                root, 'one_class', 'ball', split, f'{k}.obj'))
 
 
 # ---------------------------------------------------------------- checks
@@ -160,7 +180,8 @@ def named(line: str, argv) -> bool:
     words = [a for a in argv if a.startswith('--')] + \
         [os.path.basename(a.rstrip('/')) for a in argv if '/' in a]
     if not any(words):  # nothing given: the message names what is missing
-        return '--' in line or 'argument' in line
+        return '--' in line or 'argument' in line or any(
+            w.isupper() and len(w) > 2 for w in line.replace(':', ' ').split())
     return 'argument ' in line or any(w and w in line for w in words)
 
 
@@ -203,7 +224,7 @@ def cases():
                 'empty.off', 'repeat.obj', 'past.off', 'missing.obj',
                 'folder.obj', 'notes.txt', 'mesh.xyz'):
         yield S + [f'{{}}/{bad}', '--smooth', '1', '--out', '{}/o'], 2, None
-    for signal in ('short.npy', 'cube.npy', 'nan.npy', 'nothing',
+    for signal in ('{}/short.npy', '{}/cube.npy', '{}/nan.npy', 'nothing',
                    '{}/missing.npy', '{}/ascii.ply:nope'):
         yield S + ['{}/ico.obj', '--smooth', '1', '--signal', signal,
                    '--out', '{}/o'], 2, None
@@ -344,8 +365,36 @@ def cases():
     yield ['demo', '--out', '{}/mine', '--quick'], 2, None
 
     T = ['train']
-    tiny = ['--epochs', '1', '--num-points', '64', '--shapes-per-class',
-            '2', '--batch-size', '4', '--quiet', '--root', '{}/data']
+    tiny = TINY_TRAINING
+
+    def epochs(count):
+        def check(root, out):
+            with open(os.path.join(out, 'metrics.json')) as f:
+                return len(json.load(f)['history']) == count
+        return check
+    yield T + ['deltanet', '--out', '{}/t'] + tiny, 0, epochs(1)
+    yield T + ['deltanet', '--out', '{}/run'] + tiny, 2, None
+    yield T + ['deltanet', '--out', '{}/run', '--overwrite'] + tiny, 0, \
+        epochs(1)
+    yield T + ['deltanet', '--out', '{}/run', '--resume'] + tiny + [
+        '--lr', '0.5', '--num-points', '128'], 2, None
+    yield T + ['deltanet', '--out', '{}/run', '--resume'] + tiny + [
+        '--epochs', '2'], 2, None
+    yield T + ['deltanet', '--out', '{}/run', '--resume', '--allow-changes',
+               'epochs'] + tiny + ['--epochs', '2'], 0, epochs(2)
+    yield T + ['deltanet', '--out', '{}/run', '--resume', '--allow-changes',
+               'lr'] + tiny, 2, None
+    yield T + ['hsn', '--out', '{}/run', '--resume'] + tiny, 2, None
+    yield T + ['deltanet', '--out', '{}/truncated', '--resume'] + tiny, 2, \
+        None
+    yield T + ['deltanet', '--out', '{}/t', '--resume'] + tiny, 0, \
+        epochs(1)
+    yield T + ['deltanet', '--out', '{}/t'] + tiny + ['--batch-size', '1'], \
+        2, None
+    yield T + ['deltanet', '--dataset', '{}/one_class', '--out',
+               '{}/t'] + tiny, 2, None
+    yield T + ['deltanet', '--out', '{}/t', '--device', 'cuda'] + tiny, 2, \
+        None
     yield T + ['deltanet', '--out', '{}/notes.txt'] + tiny, 2, None
     yield T + ['deltanet', '--out', '{}/mine'] + tiny, 2, None
     yield T + ['deltanet', '--device', 'bogus', '--out', '{}/t'] + tiny, \
@@ -366,6 +415,50 @@ def cases():
     yield T + ['deltanet', '--protocol', 'nope', '--out', '{}/t'] + tiny, \
         2, None
     yield T + ['deltanet', '--out', '{}/meshes'] + tiny, 2, None
+
+
+# options of train that take no negative value (checked after parsing)
+TRAIN_POSITIVE = ('--epochs', '--batch-size', '--num-points', '--lr', '--k',
+                  '--rings', '--eval-every', '--workers', '--threads',
+                  '--dropout', '--radius', '--weight-decay', '--max-order',
+                  '--embedding-size', '--mlp-depth', '--gamma')
+
+
+def every_numeric_option():
+    """Each numeric option of every sub-command (found in the parser) with
+    values no such option takes: text, and for the options declared
+    positive or non-negative, a negative number."""
+    from tg_intrinsic.cli import build_parser
+    from tg_intrinsic.cli import common
+    checked = {common.positive_float, common.positive_int,
+               common.nonnegative_float, common.nonnegative_int}
+    base = {'solve': ['solve', '{}/ico.obj', '--smooth', '1', '--out',
+                      '{}/o'],
+            'svbrdf': ['svbrdf', '{}/scene', '--out', '{}/v'],
+            'train': ['train', 'deltanet', '--out', '{}/t'] + TINY_TRAINING,
+            'demo': ['demo', '--out', '{}/d', '--quick']}
+    parser = build_parser()
+    commands = next(a for a in parser._actions
+                    if a.dest == 'command').choices
+    for name, command in commands.items():
+        groups = [(base.get(name), command)]
+        if name == 'precompute':
+            kinds = next(a for a in command._actions
+                         if a.dest == 'kind').choices
+            groups = [(['precompute', kind, '{}/meshes', '{}/p'], sub)
+                      for kind, sub in kinds.items()]
+        for argv, sub in groups:
+            if argv is None:
+                continue
+            for action in sub._actions:
+                if action.type in (None, str) or not action.option_strings \
+                        or action.nargs not in (None, 1):
+                    continue
+                option = action.option_strings[-1]
+                values = ['x'] + (['-1'] if action.type in checked or (
+                    name == 'train' and option in TRAIN_POSITIVE) else [])
+                for value in values:
+                    yield argv + [option, value], 2, None
 
 
 def run_case(template, expected, check, base):
@@ -413,7 +506,8 @@ def run_case(template, expected, check, base):
     stray = [name for name in after if name not in before and
              not any(name == r or name.startswith(r + os.sep)
                      for r in regions)
-             and not name.startswith('data' + os.sep)]
+             # PyG-style folder data sets cache what they read beside it
+             and 'processed_tg_intrinsic' not in name]
     result = {
         'argv': [a.replace(root, '{}') for a in argv],
         'exit_code': code, 'expected': expected,
@@ -434,7 +528,8 @@ def main_sweep():
     base = tempfile.mkdtemp(prefix='sweep-base-')
     make_files(base)
     results = []
-    for template, expected, check in cases():
+    for template, expected, check in list(cases()) + list(
+            every_numeric_option()):
         result = run_case(template, expected, check, base)
         results.append(result)
         verdict = all(result[k] for k in (

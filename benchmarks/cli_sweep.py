@@ -99,6 +99,23 @@ def make_files(root: str):
               properties={'nx': 0 * ico.vertices[:, 0],
                           'ny': 0 * ico.vertices[:, 1],
                           'nz': 0 * ico.vertices[:, 2]})
+    # an unreferenced vertex, a huge scale, a non-manifold fin, a unicode
+    # name, an OFF of quads
+    with open(os.path.join(root, 'loose.obj'), 'w') as f:
+        f.write(open(os.path.join(root, 'ico.obj')).read() + 'v 9 9 9\n')
+    trimesh.Trimesh(ico.vertices * 1e8, ico.faces, process=False).export(
+        os.path.join(root, 'huge.obj'))
+    fin = np.vstack([ico.vertices, [[0, 0, 2.0]]])
+    trimesh.Trimesh(fin, np.vstack([ico.faces, [[ico.faces[0][0],
+                                                 ico.faces[0][1], len(fin)
+                                                 - 1]]]),
+                    process=False).export(os.path.join(root, 'fin.obj'))
+    ico.export(os.path.join(root, 'kugel-ä.obj'))
+    open(os.path.join(root, 'quads.off'), 'w').write(
+        'OFF\n# a cube\n8 6 0\n' + ''.join(
+            f'{x} {y} {z}\n' for x in (0, 1) for y in (0, 1) for z in (0, 1))
+        + '4 0 1 3 2\n4 4 6 7 5\n4 0 4 5 1\n4 2 3 7 6\n4 0 2 6 4\n'
+        '4 1 5 7 3\n')
     n = len(ico.vertices)
     np.savetxt(os.path.join(root, 'sig.txt'), np.ones(n))
     np.savetxt(os.path.join(root, 'sig.csv'), np.ones((n, 3)), delimiter=',')
@@ -141,6 +158,8 @@ def make_files(root: str):
                      '--example-image-size', '16',
                      '--example-subdivisions', '1', '--quiet']) == 0
 
+        assert main(['svbrdf', os.path.join(root, 'scene'), '--out',
+                     os.path.join(root, 'maps'), '--quiet']) == 0
     checkpoint = os.path.join(root, 'truncated', 'checkpoint.pt')
     with open(checkpoint, 'rb') as f:
         half = f.read()[:1000]
@@ -284,6 +303,17 @@ def cases():
     yield S + ['{}/ico.obj', '--smooth', '1', '--out', '{}/mine/sub'], \
         0, solve_ok(162)
 
+    for name, count in (('loose.obj', None), ('huge.obj', 162),
+                        ('fin.obj', 163), ('kugel-ä.obj', 162),
+                        ('quads.off', 8)):
+        yield S + [f'{{}}/{name}', '--smooth', '1e-3', '--out', '{}/o'], \
+            (2 if count is None else 0), \
+            (None if count is None else solve_ok(count))
+    yield S + ['{}/huge.obj', '--smooth', '1e13', '--out', '{}/o'], 0, \
+        solve_ok(162)
+    yield S + ['{}/ico.obj', '--smooth', '1', '--signal', '{}/ico.obj',
+               '--out', '{}/o'], 2, None
+
     P = ['precompute']
 
     def manifest(**expected):
@@ -329,6 +359,9 @@ def cases():
     yield P + ['mls', '{}/meshes', '{}/notes.txt'], 2, None
     yield P + ['mls', '{}/meshes', '{}/p', '--workers', '0'], 2, None
     yield P + ['bogus', '{}/meshes', '{}/p'], 2, None
+    yield P + ['gravo', '{}/ico.obj', '{}/cache', '--overwrite',
+               '--lower-bound', '10'], 0, manifest(lower_bound=10)
+    yield ['info', '--json'], 0, None
 
     V = ['svbrdf']
     yield V + ['--write-example', '{}/mine'], 2, None
@@ -424,6 +457,20 @@ TRAIN_POSITIVE = ('--epochs', '--batch-size', '--num-points', '--lr', '--k',
                   '--embedding-size', '--mlp-depth', '--gamma')
 
 
+def interrupted():
+    """Ctrl-C while each command writes its results (the named function
+    raises KeyboardInterrupt): exit 130 and the earlier results kept."""
+    yield (['solve', '{}/ico.obj', '--smooth', '1', '--out', '{}/earlier'],
+           130, None, ('tg_intrinsic.io.figures', 'draw_surface'))
+    yield (['precompute', 'mls', '{}/meshes', '{}/cache', '--k', '4',
+            '--overwrite'], 130, None,
+           ('tg_intrinsic.cli.precompute', 'precompute_file'))
+    yield (['svbrdf', '{}/scene', '--out', '{}/maps'], 130, None,
+           ('tg_intrinsic.io', 'write_ply'))
+    yield (['svbrdf', '--write-example', '{}/scene'], 130, None,
+           ('tg_intrinsic.io', 'write_scene'))
+
+
 def every_numeric_option():
     """Each numeric option of every sub-command (found in the parser) with
     values no such option takes: text, and for the options declared
@@ -461,8 +508,11 @@ def every_numeric_option():
                     yield argv + [option, value], 2, None
 
 
-def run_case(template, expected, check, base):
-    """Runs one case in a copy of the sandbox ``base``."""
+def run_case(base, template, expected, check, interrupt=None):
+    """Runs one case in a copy of the sandbox ``base`` (``interrupt``:
+    ``(module, name)`` of a function that then raises KeyboardInterrupt)."""
+    import importlib
+    from unittest import mock
     root = tempfile.mkdtemp(prefix='sweep-')
     shutil.rmtree(root)
     shutil.copytree(base, root, symlinks=True)
@@ -474,8 +524,14 @@ def run_case(template, expected, check, base):
     before = snapshot(root)
     stderr = io.StringIO()
     start = time.perf_counter()
+
+    def ctrl_c(*args, **kwargs):
+        raise KeyboardInterrupt
+    patch = contextlib.nullcontext() if interrupt is None else \
+        mock.patch.object(importlib.import_module(interrupt[0]),
+                          interrupt[1], ctrl_c)
     with contextlib.redirect_stderr(stderr), \
-            contextlib.redirect_stdout(io.StringIO()):
+            contextlib.redirect_stdout(io.StringIO()), patch:
         try:
             code = main(argv)
         except BaseException as error:  # noqa: BLE001 - recorded
@@ -485,7 +541,8 @@ def run_case(template, expected, check, base):
     out = out_folder(argv)
     out_rel = None if out is None else os.path.relpath(out, root)
     lines = [ln for ln in stderr.getvalue().splitlines()
-             if ': error:' in ln or 'unexpected' in ln]
+             if ': error:' in ln or 'unexpected' in ln or
+             'interrupted' in ln]
     message = lines[-1] if lines else ''
     # a failed run changes nothing; a successful one only its --out
     changed = [name for name, digest in before.items()
@@ -519,18 +576,47 @@ def run_case(template, expected, check, base):
         'no_stray_files': not stray, 'stray': stray[:5],
         'right_result': code != 0 or check is None or bool(check(root, out)),
         'message_names_input': code != 2 or named(message, argv),
+        'interrupted': interrupt is not None,
     }
     shutil.rmtree(root, ignore_errors=True)
     return result
+
+
+def plot(results, counts):
+    """cli_sweep.png: the cases of every sub-command by exit code, and
+    the verdicts over all of them."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from tg_intrinsic.io.figures import save_figure
+    commands = sorted({(r['argv'] or ['(none)'])[0] for r in results})
+    fig, ax = plt.subplots(figsize=(7, 3.6))
+    bottom = np.zeros(len(commands))
+    for code, colour in ((0, '#4c9a5f'), (2, '#4f7cba'), (130, '#d08c3f')):
+        height = np.array([sum(r['exit_code'] == code for r in results
+                               if (r['argv'] or ['(none)'])[0] == c)
+                           for c in commands])
+        ax.bar(commands, height, bottom=bottom, color=colour,
+               label=f'exit {code}' + {0: ' (a result)',
+                                       2: ' (a user mistake, one line)',
+                                       130: ' (Ctrl-C while writing)'}[code])
+        bottom += height
+    ax.set_ylabel('cases')
+    ax.set_title(f"{counts['cases']} command lines: {counts['data_loss']} "
+                 f"lost files, {counts['wrong_results']} wrong results, "
+                 f"{counts['other_exit_codes']} other exit codes",
+                 fontsize=10)
+    ax.legend(frameon=False)
+    save_figure(fig, RESULTS.replace('.json', '.png'))
 
 
 def main_sweep():
     base = tempfile.mkdtemp(prefix='sweep-base-')
     make_files(base)
     results = []
-    for template, expected, check in list(cases()) + list(
+    for case in list(cases()) + list(interrupted()) + list(
             every_numeric_option()):
-        result = run_case(template, expected, check, base)
+        result = run_case(base, *case)
         results.append(result)
         verdict = all(result[k] for k in (
             'allowed_exit_code', 'as_expected', 'data_kept',
@@ -544,6 +630,7 @@ def main_sweep():
         'cases': len(results),
         'exit_0': sum(r['exit_code'] == 0 for r in results),
         'exit_2': sum(r['exit_code'] == 2 for r in results),
+        'exit_130': sum(r['exit_code'] == 130 for r in results),
         'other_exit_codes': sum(not r['allowed_exit_code']
                                 for r in results),
         'unexpected_exit_codes': sum(not r['as_expected'] for r in results),
@@ -556,8 +643,9 @@ def main_sweep():
     print(json.dumps(counts, indent=1))
     atomic_write_json(RESULTS, {'counts': counts, 'cases': results,
                                 'machine': machine_info()})
+    plot(results, counts)
     bad = sum(v for k, v in counts.items()
-              if k not in ('cases', 'exit_0', 'exit_2'))
+              if k not in ('cases', 'exit_0', 'exit_2', 'exit_130'))
     return 1 if bad else 0
 
 

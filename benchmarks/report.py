@@ -821,6 +821,21 @@ def normalisation(d, _):
              'DeltaNet', 'normalisation.py', result)]
 
 
+@rows_for('cli_sweep')
+def cli_sweep(d, _):
+    c = d['counts']
+    result = (f"{c['cases']} command lines over every sub-command (files "
+              f"other tools write, every numeric option, earlier results, "
+              f"resumes): exit 0 {c['exit_0']}, exit 2 {c['exit_2']}, "
+              f"**other exit codes {c['other_exit_codes']}, lost or changed "
+              f"files {c['data_loss']}, stray files {c['stray_files']}, "
+              f"wrong results {c['wrong_results']}, messages that name "
+              f"none of the user's options or files "
+              f"{c['messages_not_naming_the_input']}**")
+    return [("The command line on a careful user's inputs", 'cli_sweep.py',
+             result)]
+
+
 SVBRDF_METHODS = [
     ('constant 0.5', 'a constant 0.5 everywhere'),
     ('spectrum', 'spectrum-only'),
@@ -1177,6 +1192,7 @@ def svbrdf_views(d, _):
         + ' -- '.join(parts))
     return [('which views to keep: greedy next view by expected entropy '
              'reduction (paper Fig. 5.8)', 'svbrdf_views.py', result)]
+
 
 @rows_for('svbrdf_speed')
 def svbrdf_speed(d, _):

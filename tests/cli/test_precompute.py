@@ -335,3 +335,16 @@ def test_files_precompute_did_not_write_need_overwrite(tmp_path, capsys):
     code, _, stderr = cli(single, capsys)
     assert code == 2 and 'exists' in stderr and '--overwrite' in stderr
     assert cli(single + ['--overwrite'], capsys)[0] == 0
+
+
+def test_an_stl_is_welded_for_every_kind(tmp_path, capsys):
+    # precompute hsn refused an STL ("weld them first"); now every command
+    # reads it by the same policy
+    trimesh.creation.icosphere(1).export(str(tmp_path / 'ball.stl'))
+    for kind in ('hsn', 'mls', 'gravo'):
+        out = tmp_path / f'{kind}.pt'
+        code, _, stderr = cli(['--quiet', 'precompute', kind,
+                               tmp_path / 'ball.stl', out], capsys)
+        assert code == 0, stderr
+        assert 'welded 198 vertices' in stderr
+        assert load(out).num_nodes == 42

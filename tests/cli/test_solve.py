@@ -509,3 +509,22 @@ def test_foreign_files_need_overwrite_and_are_kept(files, tmp_path,
     assert sorted(os.listdir(out)) == ['.tg-intrinsic.json', 'notes.txt',
                                        'report.json', 'result.ply',
                                        'result.png']
+
+
+def test_a_weight_too_small_to_smooth_warns(files, tmp_path, capsys):
+    # on a surface 1e8 times larger, --smooth 1e-3 leaves it as it was:
+    # said, with the weight that would have an effect
+    paths, pos, face, _, _ = files
+    huge = str(tmp_path / 'huge.obj')
+    trimesh.Trimesh(pos * 1e8, face, process=False).export(huge)
+    code, _, stderr = cli(['solve', huge, '--smooth', '1e-3', '--quiet',
+                           '--out', tmp_path / 'out'], capsys)
+    assert code == 0
+    assert 'tg-intrinsic: warning: --smooth 0.001 is so small' in stderr
+    bound = float(stderr.split('use --smooth at least ')[1].split()[0])
+    code, _, stderr = cli(['solve', huge, '--smooth', str(100 * bound),
+                           '--quiet', '--out', tmp_path / 'out'], capsys)
+    assert code == 0 and 'warning' not in stderr
+    moved, _, _ = read_surface(str(tmp_path / 'out' / 'result.ply'))
+    # beyond the bound the surface moves by more than rounding
+    assert np.abs(moved - pos * 1e8).max() > 1e-13 * 1e8

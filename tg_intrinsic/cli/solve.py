@@ -14,6 +14,7 @@ report.json (the problem, the Laplacian, the hierarchy, the residual of
 every cycle and the timings)."""
 import os
 import time
+import warnings
 
 from .common import (UsageError, default_of, stage, positive_float,
                      positive_int)
@@ -206,21 +207,26 @@ def run(args):
             'method')
         options = dict(solver=solver, tol=args.tol, cycle=args.cycle,
                        max_iter=args.max_cycles, method=method)
-        try:
-            if args.conformal_flow is not None:
-                steps = []
-                x = conformal_flow(data, args.conformal_flow, args.steps,
-                                   callback=lambda t, i: steps.append(i),
-                                   **options)[-1]
-                solver.info = combined_info(steps)
-            elif args.poisson is not None:
-                x = poisson(data, args.poisson, y=torch.from_numpy(y),
-                            **options)
-            else:
-                x = smooth(data, args.smooth, beta=args.bilaplacian or 0.0,
-                           y=torch.from_numpy(y), **options)
-        except ValueError as error:
-            raise UsageError(_with_option_names(str(error))) from error
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter('always')
+            try:
+                if args.conformal_flow is not None:
+                    steps = []
+                    x = conformal_flow(data, args.conformal_flow, args.steps,
+                                       callback=lambda t, i: steps.append(i),
+                                       **options)[-1]
+                    solver.info = combined_info(steps)
+                elif args.poisson is not None:
+                    x = poisson(data, args.poisson, y=torch.from_numpy(y),
+                                **options)
+                else:
+                    x = smooth(data, args.smooth, beta=args.bilaplacian or 0.0,
+                               y=torch.from_numpy(y), **options)
+            except ValueError as error:
+                raise UsageError(_with_option_names(str(error))) from error
+        for warning in caught:  # in the command line's words
+            warnings.warn(_with_option_names(str(warning.message)),
+                          warning.category)
         x = x.numpy()
     info = solver.info
     times['setup'] = info.setup_time

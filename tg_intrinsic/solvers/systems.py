@@ -5,6 +5,7 @@ the screened Poisson problem :math:`(S + \eta M) x = M y`, and the
 conformalized mean curvature flow, whose matrix changes every step."""
 import math
 import numbers
+import warnings
 from typing import Optional, Tuple
 
 import numpy as np
@@ -115,15 +116,29 @@ def _check_scale(S: sp.csr_matrix, m: np.ndarray, parameter: str,
     ``value`` (named ``parameter``) weighs the mass term when ``on_mass``,
     else the stiffness term. Both are in absolute units, so a weight for
     another scale can make the system singular in float64; the message
-    gives the usable bound and, for an extreme scale, the rescaling."""
+    gives the usable bound and, for an extreme scale, the rescaling.
+    The other way round, a Laplacian term below the mass term's rounding
+    leaves the result the right-hand side: a warning with the bound."""
     ratio = m.max() / abs(S).max()
     share = value * ratio if on_mass else ratio / value
-    if share >= RESOLVABLE_MASS:
-        return
-    bound = RESOLVABLE_MASS / ratio if on_mass else ratio / RESOLVABLE_MASS
     area = m.sum()
     rescale = '' if 1e-6 <= area <= 1e6 else \
         ', or rescale the surface to about unit area (NormalizeArea)'
+    if share * RESOLVABLE_MASS > 1:
+        bound = 1 / (RESOLVABLE_MASS * ratio) if on_mass else \
+            ratio * RESOLVABLE_MASS
+        warnings.warn(
+            f"'{parameter}' = {value:.3g} is so "
+            f"{'large' if on_mass else 'small'} for this surface (total "
+            f"area {area:.3g}) that the Laplacian term is {1 / share:.1e} "
+            f"of the mass term, below float64 rounding: the result is the "
+            f"right-hand side{' over eta' if on_mass else ''}, unsmoothed; "
+            f"use '{parameter}' {'at most' if on_mass else 'at least'} "
+            f"{bound:.2g} for an effect{rescale}", stacklevel=3)
+        return
+    if share >= RESOLVABLE_MASS:
+        return
+    bound = RESOLVABLE_MASS / ratio if on_mass else ratio / RESOLVABLE_MASS
     raise ValueError(
         f"'{parameter}' = {value:.3g} is too {'small' if on_mass else 'large'}"
         f" for this surface (total area {area:.3g}): the mass term is "

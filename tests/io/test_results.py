@@ -74,3 +74,44 @@ def test_a_run_killed_between_the_two_renames_is_put_back(tmp_path):
     claim_folder(str(out), 'cmd')
     assert (out / 'a.txt').read_text() == 'kept'
     assert sorted(os.listdir(tmp_path)) == ['out']
+
+
+def test_the_working_directory_is_never_moved(tmp_path, monkeypatch):
+    out = tmp_path / 'out'
+    with result_folder(str(out), 'cmd') as staging:
+        write(staging, 'a.txt', 'first')
+    inode = os.stat(out).st_ino
+    monkeypatch.chdir(out)
+    with result_folder('.', 'cmd') as staging:
+        write(staging, 'b.txt', 'second')
+    assert os.stat(out).st_ino == inode  # the same folder, updated
+    assert sorted(os.listdir(out)) == [RECORD, 'b.txt']
+    assert sorted(os.listdir(tmp_path)) == ['out']
+
+
+def test_a_folder_in_the_way_is_not_deleted(tmp_path):
+    out = tmp_path / 'out'
+    write(out, 'mine.txt')
+    write(out, 'a.txt/inside.txt', 'a folder of the user')
+    with pytest.raises(ValueError, match="a folder of that name is in the "
+                                         "way"):
+        with result_folder(str(out), 'cmd', overwrite=True) as staging:
+            write(staging, 'a.txt')
+    assert (out / 'a.txt' / 'inside.txt').read_text() == \
+        'a folder of the user'
+    assert not (out / RECORD).exists() and sorted(os.listdir(out)) == [
+        'a.txt', 'mine.txt']  # and nothing else moved in
+
+
+@pytest.mark.skipif(not hasattr(os, 'geteuid') or os.geteuid() == 0,
+                    reason='root may write into any folder')
+def test_a_read_only_output_folder_is_rejected(tmp_path):
+    locked = tmp_path / 'locked'
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        for path in (locked, locked / 'new'):
+            with pytest.raises(ValueError, match="is not writable"):
+                claim_folder(str(path), 'cmd')
+    finally:
+        locked.chmod(0o700)

@@ -1,9 +1,9 @@
 """What every sub-command shares: the user-error type, argument types that
-reject bad values in one line, the output folder and progress bars."""
+reject bad values in one line, and progress bars (output folders:
+:mod:`tg_intrinsic.io.results`)."""
 import argparse
 import inspect
 import math
-import os
 import sys
 import time
 from contextlib import contextmanager
@@ -71,20 +71,6 @@ def default_of(function, name: str):
     """The default of argument ``name`` of a library ``function`` (or
     class): the library owns the value, the command line shows it."""
     return inspect.signature(function).parameters[name].default
-
-
-def output_folder(path: str) -> str:
-    """Creates the output folder (and parents) and checks it is writable."""
-    if os.path.exists(path) and not os.path.isdir(path):
-        raise UsageError(f"--out {path!r} is a file; give a folder")
-    try:
-        os.makedirs(path, exist_ok=True)
-    except OSError as error:
-        raise UsageError(f"cannot create the output folder {path!r}: "
-                         f"{error.strerror}") from None
-    if not os.access(path, os.W_OK):
-        raise UsageError(f"the output folder {path!r} is not writable")
-    return path
 
 
 def progress(iterable: Iterable, desc: str, quiet: bool = False,

@@ -40,10 +40,11 @@ def check_output_path(path: str, inputs: Iterable[str] = (),
     if not os.path.isdir(parent):
         raise ValueError(f"{option} '{path}' cannot be created: '{parent}' "
                          f"is a file, not a folder; give another {option}")
-    if not os.access(parent, os.W_OK):
-        raise ValueError(f"{option} '{path}' cannot be written: the folder "
-                         f"'{parent}' is not writable; give another "
-                         f"{option}")
+    for folder in (parent, path):
+        if os.path.isdir(folder) and not os.access(folder, os.W_OK):
+            raise ValueError(f"{option} '{path}' cannot be written: the "
+                             f"folder '{folder}' is not writable; give "
+                             f"another {option}")
     folder = os.path.realpath(path)
     for source in inputs:
         if source is None:
@@ -146,15 +147,20 @@ def commit_folder(staging: str, path: str, command: str) -> None:
     """Puts the results in ``staging`` in place at ``path``: by renaming
     the whole folder when ``path`` is missing or holds only results of
     ``command`` (so readers see the old results or the new ones), else
-    file by file, keeping the foreign files and removing the files of the
-    earlier run that this one did not write again."""
+    (foreign files, or the working directory inside) file by file,
+    keeping the foreign files and removing the files of the earlier run
+    that this one did not write again."""
     files = [name for name in _files_under(staging) if name != RECORD]
     write_record(staging, command, files)
     if not os.path.exists(path):
         os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
         os.rename(staging, path)
         return
-    if not foreign_files(path, command):
+    real, here = os.path.realpath(path), os.path.realpath(os.getcwd())
+    holds_cwd = here == real or here.startswith(real + os.sep)
+    # (a folder holding the working directory stays: renaming it away
+    # would leave the user's shell in a deleted folder)
+    if not foreign_files(path, command) and not holds_cwd:
         parent, name = os.path.split(os.path.abspath(path))
         aside = tempfile.mkdtemp(prefix=f'.{name}{_PREVIOUS}', dir=parent)
         os.rmdir(aside)
@@ -163,11 +169,15 @@ def commit_folder(staging: str, path: str, command: str) -> None:
         shutil.rmtree(aside, ignore_errors=True)
         return
     old = recorded_files(path, command) or set()
+    for name in files:  # all checked before anything moves
+        target = os.path.join(path, name)
+        if os.path.isdir(target) and not os.path.islink(target):
+            raise ValueError(f"cannot write '{target}': a folder of that "
+                             f"name is in the way; move it, or give "
+                             f"another output folder")
     for name in files:
         target = os.path.join(path, name)
         os.makedirs(os.path.dirname(target), exist_ok=True)
-        if os.path.isdir(target) and not os.path.islink(target):
-            shutil.rmtree(target)
         os.replace(os.path.join(staging, name), target)
     for name in sorted(old - set(files)):
         try:

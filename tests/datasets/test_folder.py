@@ -106,7 +106,8 @@ def test_force_reload_and_task_are_passed_on(tmp_path, monkeypatch):
     calls = []
     read = mesh_folder.read_mesh
     monkeypatch.setattr(mesh_folder, 'read_mesh',
-                        lambda path: calls.append(path) or read(path))
+                        lambda path, **kw: calls.append(path) or
+                        read(path, **kw))
     open_folder(str(tmp_path), 'train', task='segmentation')
     assert calls == []  # cached
     open_folder(str(tmp_path), 'train', task='segmentation',

@@ -354,9 +354,9 @@ def test_manifest_notices_changes(tmp_path, monkeypatch):
     seg_tree(tmp_path)
     calls = []
 
-    def counting(path):
+    def counting(path, **kwargs):
         calls.append(os.path.basename(path))
-        return mf.read_mesh(path)
+        return mf.read_mesh(path, **kwargs)
 
     monkeypatch.setattr(mesh_folder, 'read_mesh', counting)
 

@@ -826,7 +826,8 @@ def cli_sweep(d, _):
     c = d['counts']
     result = (f"{c['cases']} command lines over every sub-command (files "
               f"other tools write, every numeric option, earlier results, "
-              f"resumes): exit 0 {c['exit_0']}, exit 2 {c['exit_2']}, "
+              f"resumes, Ctrl-C while writing): exit 0 {c['exit_0']}, exit 2 "
+              f"{c['exit_2']}, exit 130 {c.get('exit_130', 0)}, "
               f"**other exit codes {c['other_exit_codes']}, lost or changed "
               f"files {c['data_loss']}, stray files {c['stray_files']}, "
               f"wrong results {c['wrong_results']}, messages that name "

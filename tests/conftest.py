@@ -88,3 +88,29 @@ def svbrdf_observation_geometry(num_points=200, num_views=40, seed=0,
                 obs_radiance=torch.zeros(num_points, num_views, 3,
                                          dtype=dtype),
                 envmap=sky_envmap(dtype=dtype))
+
+
+# ----------------------------------------------------------------------
+# The device mode: `pytest --device cuda` runs the device tests
+# (tests/test_device_mode.py and the tests that take the `device` fixture)
+# on that device, against the CPU where they have a reference.
+
+def pytest_addoption(parser):
+    parser.addoption('--device', default='cpu',
+                     help="device of the device tests: cpu (default), "
+                     "cuda or cuda:N")
+
+
+def pytest_configure(config):
+    requested = config.getoption('--device')
+    if requested != 'cpu' and not torch.cuda.is_available():
+        # one line, not a skip per test
+        pytest.exit(f"--device {requested}: no CUDA device on this "
+                    f"machine; the device tests were not run", returncode=0)
+
+
+@pytest.fixture(scope='session')
+def device(request):
+    """The device of ``pytest --device`` (indexed: cuda means cuda:0)."""
+    from tg_intrinsic.devices import resolve_device
+    return resolve_device(request.config.getoption('--device'), '--device')

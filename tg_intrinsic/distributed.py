@@ -23,6 +23,8 @@ from typing import Callable, List, Optional, Tuple
 import numpy as np
 import torch
 
+from tg_intrinsic.devices import resolve_device
+
 BACKENDS = ('auto', 'gloo', 'nccl')
 
 
@@ -55,38 +57,6 @@ def launched_world_size(environ=None) -> int:
     return 1 if env is None else env['world_size']
 
 
-def check_device(device: str, name: str = 'device') -> None:
-    """Raises a :class:`ValueError` naming ``name`` unless ``device`` is
-    ``'auto'``, ``'cpu'``, ``'cuda'``, ``'cuda:N'`` or ``'mps'`` and this
-    machine has it."""
-    accepted = "auto, cpu, cuda, cuda:N (N a GPU's index) or mps"
-    if device == 'auto':
-        return
-    try:
-        parsed = torch.device(device)
-    except (RuntimeError, ValueError, TypeError):
-        raise ValueError(f"{name} {device!r} is not a device; use "
-                         f"{accepted}") from None
-    if parsed.type == 'cuda':
-        count = torch.cuda.device_count() if torch.cuda.is_available() \
-            else 0
-        if not count:
-            raise ValueError(f"{name} {device!r}: PyTorch finds no CUDA "
-                             f"device on this machine; use cpu or auto")
-        if parsed.index is not None and parsed.index >= count:
-            raise ValueError(f"{name} {device!r}: this machine has {count} "
-                             f"CUDA device(s), cuda:0 to cuda:{count - 1}")
-    elif parsed.type == 'mps':
-        mps = getattr(torch.backends, 'mps', None)
-        if mps is None or not mps.is_available():
-            raise ValueError(f"{name} {device!r}: PyTorch finds no MPS "
-                             f"(Apple GPU) device on this machine; use cpu "
-                             f"or auto")
-    elif parsed.type != 'cpu':
-        raise ValueError(f"{name} {device!r} is not supported; use "
-                         f"{accepted}")
-
-
 def start(backend: str = 'auto', device: str = 'auto'
           ) -> Tuple[torch.device, bool]:
     """The device of this process, after joining the process group that
@@ -99,13 +69,9 @@ def start(backend: str = 'auto', device: str = 'auto'
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got "
                          f"{backend!r}")
-    check_device(device)
     env = torchrun_environment()
-    if device == 'auto':
-        device = 'cuda' if torch.cuda.is_available() else 'cpu'
-    device = torch.device(device)
-    if env is not None and device.type == 'cuda' and device.index is None:
-        device = torch.device('cuda', env['local_rank'])
+    device = resolve_device(device, rank=None if env is None
+                            else env['local_rank'])
     if device.type == 'cuda':
         torch.cuda.set_device(device)
     if env is None or dist.is_initialized():

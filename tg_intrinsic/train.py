@@ -110,6 +110,7 @@ from torch_geometric.transforms import Compose, NormalizeScale, RandomScale
 from tqdm import tqdm
 
 from tg_intrinsic import distributed
+from tg_intrinsic.devices import check_device, default_threads
 from tg_intrinsic.cli.common import UsageError, one_line
 from tg_intrinsic.io.figures import save_figure
 from tg_intrinsic.io.results import (RECORD, check_output_path, claim_folder,
@@ -957,8 +958,9 @@ def _train(args, device, state: Optional[Dict]) -> Dict:
 
     quiet = args.quiet or not main_process
     seed_everything(args.seed)
-    if args.threads:
-        torch.set_num_threads(args.threads)
+    # by default the cores this process shares with the others torchrun
+    # started here: concurrent runs do not each take them all
+    torch.set_num_threads(args.threads or default_threads())
     build = build_mesh_datasets if args.model == 'hsn' else build_point_sets
     if not main_process:   # no progress bars beside rank 0's
         args = argparse.Namespace(**{**vars(args), 'quiet': True})
@@ -1365,7 +1367,7 @@ def check_arguments(args, parser):
         args.allow_changes = allowed_changes(args.allow_changes) \
             if isinstance(args.allow_changes, str) else \
             list(args.allow_changes)
-        distributed.check_device(args.device, '--device')
+        check_device(args.device, '--device')
     except ValueError as error:
         parser.error(str(error))
     if args.allow_changes and not args.resume:

@@ -172,23 +172,6 @@ def add_arguments(parser):
                          '(default: 0)')
 
 
-def _device(text: str):
-    import torch
-    if text == 'auto':
-        return torch.device('cuda' if torch.cuda.is_available() else 'cpu')
-    try:
-        device = torch.device(text)
-    except (RuntimeError, ValueError):
-        raise UsageError(f"--device {text!r} is not a device; use cpu, "
-                         f"cuda, cuda:N or auto") from None
-    if device.type == 'cuda' and not torch.cuda.is_available():
-        raise UsageError(f"--device {text}: no CUDA device is available "
-                         f"here; use --device cpu")
-    if device.type not in ('cpu', 'cuda'):
-        raise UsageError(f"--device {text!r}: use cpu, cuda, cuda:N or auto")
-    return device
-
-
 def run(args):
     example_options = (args.example_views, args.example_image_size,
                        args.example_subdivisions)
@@ -270,11 +253,12 @@ def recover(args) -> int:
     import torch
 
     from tg_intrinsic.io import read_scene
+    from tg_intrinsic.devices import resolve_device
     from tg_intrinsic.io.results import check_output_path, result_folder
     from tg_intrinsic.io.scene import GROUND_TRUTH_FILE, scene_files
     from tg_intrinsic.transforms import FitSphericalHarmonics
 
-    device = _device(args.device)
+    device = resolve_device(args.device, '--device')
     dtype = getattr(torch, args.dtype)
     l_max = args.l_max if args.l_max is not None else (
         SPLIT_SUM_L_MAX if args.specular_model == 'split_sum'

@@ -61,7 +61,9 @@ def direction_visibility(points: Tensor, normal: Tensor, vertices: Tensor,
     (:func:`~tg_intrinsic.geometry.appearance.raster.point_visibility`)
     from one distant camera per direction, so the cost is one rasterisation
     of the mesh per cell. Directions below a point's horizon are not
-    excluded here (the integrands are zero there).
+    excluded here (the integrands are zero there). The rays are cast on
+    the CPU, in float64 (exact hits decide visibility); the result is on
+    the device of :obj:`points`.
 
     Args:
         points (torch.Tensor): :math:`(N, 3)`, on the mesh.
@@ -92,8 +94,9 @@ def direction_visibility(points: Tensor, normal: Tensor, vertices: Tensor,
         centre + distance * directions, centre.tolist(),
         2 * math.degrees(math.atan(0.6 * size / distance)), (pixels, pixels))
     # the lifted point is off its triangles: any hit in front occludes
-    return point_visibility(start, pos, faces, intrinsics, extrinsics,
-                            pixels, pixels, rel_tol=1e-12).to(points.device)
+    return point_visibility(start, pos, faces.detach().cpu(), intrinsics,
+                            extrinsics, pixels, pixels,
+                            rel_tol=1e-12).to(points.device)
 
 
 class _Environment:

@@ -631,3 +631,77 @@ def test_radius_finds_coincident_points():
         assert edge_index.size(1) == n * n
         assert radius(torch.zeros(n, 3), 0.5, max_num_neighbors=n,
                       loop=False).size(1) == n * (n - 1)
+
+
+# ----------------------------------------------------------------------
+# One tie-break rule: the tree (CPU) and the grid (GPU) give one graph
+
+def _brute_knn(x, k, batch=None, loop=False, query=None, query_batch=None):
+    """The rule by brute force: float64 squared distance summed coordinate
+    by coordinate, ties by index, within the example."""
+    xn = x.double().numpy()
+    qn = xn if query is None else query.double().numpy()
+    bx = np.zeros(len(xn), int) if batch is None else batch.numpy()
+    bq = bx if query is None else (np.zeros(len(qn), int)
+                                   if query_batch is None
+                                   else query_batch.numpy())
+    nbr = []
+    for i in range(len(qn)):
+        key = (xn[:, 0] - qn[i, 0]) ** 2
+        for j in range(1, xn.shape[1]):
+            key += (xn[:, j] - qn[i, j]) ** 2
+        key[bx != bq[i]] = np.inf
+        if query is None and not loop:
+            key[i] = np.inf
+        nbr.append(np.lexsort((np.arange(len(xn)), key))[:k])
+    nbr = np.concatenate(nbr)
+    return torch.from_numpy(np.stack([nbr, np.repeat(np.arange(len(qn)),
+                                                     k)]))
+
+
+def _lattice(n=6):
+    axis = torch.arange(n, dtype=torch.float64)
+    return torch.cartesian_prod(axis, axis, axis)
+
+
+CLOUDS = {
+    'random': lambda: (torch.randn(600, 3, dtype=torch.float64), None),
+    'sphere surface': lambda: (torch.nn.functional.normalize(
+        torch.randn(800, 3), dim=1), None),
+    'lattice (ties)': lambda: (_lattice(), None),
+    'duplicates': lambda: (torch.randn(100, 3).repeat(3, 1), None),
+    'batch of sizes': lambda: (torch.randn(450, 3, dtype=torch.float64),
+                               torch.tensor([0] * 100 + [1] * 300
+                                            + [2] * 50)),
+    'flat': lambda: (torch.cat([torch.rand(300, 2), torch.zeros(300, 1)],
+                               1), None),
+}
+
+
+@pytest.mark.parametrize('name', list(CLOUDS))
+@pytest.mark.parametrize('loop', [False, True])
+def test_tree_and_grid_follow_one_rule(name, loop):
+    torch.manual_seed(0)
+    x, batch = CLOUDS[name]()
+    k = 7
+    expected = _brute_knn(x, k, batch, loop)
+    assert torch.equal(knn(x, k, batch, loop), expected)  # the tree
+    length = 1 if batch is None else int(batch.max()) + 1
+    grid = nb._knn_grid(x, k, batch, loop, None, None, length)
+    assert torch.equal(grid, expected)
+
+
+def test_grid_with_queries_outside_and_small_cells(monkeypatch):
+    torch.manual_seed(1)
+    x = torch.randn(500, 3, dtype=torch.float64)
+    batch = torch.tensor([0] * 200 + [1] * 300)
+    query = 3 * torch.randn(90, 3, dtype=torch.float64)  # many outside
+    query_batch = torch.tensor([0] * 40 + [1] * 50)
+    expected = _brute_knn(x, 5, batch, query=query, query_batch=query_batch)
+    assert torch.equal(knn(x, 5, batch, query=query,
+                           query_batch=query_batch), expected)
+    # tiny chunks and cells: the rings, the fallback and the chunking
+    monkeypatch.setattr(nb, '_GRID_CHUNK', 64)
+    monkeypatch.setattr(nb, '_CELL_SHARE', 0.05)
+    grid = nb._knn_grid(x, 5, batch, False, query, query_batch, 2)
+    assert torch.equal(grid, expected)

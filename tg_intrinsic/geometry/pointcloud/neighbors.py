@@ -218,6 +218,11 @@ def _to_edge_index(nbr, ctr, device) -> Tensor:
 
 def _knn_tree(x: Tensor, k: int, batch: Optional[Tensor], loop: bool,
               query: Optional[Tensor], query_batch: Optional[Tensor]):
+    """The k nearest by the rule of :func:`knn` (float64 squared distance
+    summed coordinate by coordinate, ties by index): the tree proposes
+    candidates, which are ranked by that key; a row whose k-th key is not
+    clearly inside the tree's reach (ties or rounding at the boundary) is
+    asked again with twice as many candidates."""
     graph = query is None
     xn = _as_np(x)
     bx = _batch_np(batch, x.size(0))
@@ -225,25 +230,60 @@ def _knn_tree(x: Tensor, k: int, batch: Optional[Tensor], loop: bool,
     bq = bx if graph else _batch_np(query_batch, query.size(0))
     xt, qt, _ = _tree_coords(xn, bx, qn, bq, 0.0)
     tree = cKDTree(xt, balanced_tree=False)
-    kq = k + 1 if graph and not loop else k
-    step = max(1, _TREE_CHUNK // kq)
+    base = k + 1 if graph and not loop else k
     nbrs, ctrs = [], []
-    for s in range(0, qt.shape[0], step):
-        dist, idx = tree.query(qt[s:s + step], k=kq, workers=-1)
-        dist = dist.reshape(-1, kq)
-        idx = idx.reshape(-1, kq).astype(np.int64)
-        if graph and not loop:  # drop the centre itself (by index)
-            rows, cols = np.nonzero(
-                idx != np.arange(s, s + idx.shape[0])[:, None])
-            nbr, key = idx[rows, cols], dist[rows, cols]
-        else:
-            rows = np.repeat(np.arange(idx.shape[0]), kq)
-            nbr, key = idx.reshape(-1), dist.reshape(-1)
-        nbr, ctr = _finish_rows(rows, nbr, key, k, idx.shape[0], s)
-        nbrs.append(nbr)
-        ctrs.append(ctr)
-    return _to_edge_index(np.concatenate(nbrs), np.concatenate(ctrs),
-                          x.device)
+    rows_todo = np.arange(qt.shape[0])
+    want = base + 2
+    while rows_todo.size:
+        want = min(want, xt.shape[0])
+        step = max(1, _TREE_CHUNK // want)
+        retry = []
+        for s in range(0, rows_todo.size, step):
+            centres = rows_todo[s:s + step]
+            dist, idx = tree.query(qt[centres], k=want, workers=-1)
+            dist = dist.reshape(-1, want)
+            idx = idx.reshape(-1, want).astype(np.int64)
+            found = idx < xn.shape[0]
+            safe = np.where(found, idx, 0)
+            same = found & (bx[safe] == bq[centres][:, None])
+            if graph and not loop:
+                same &= idx != centres[:, None]
+            # every point of the example was proposed when the tree also
+            # returned another example's points, or ran out
+            whole = (~same[:, -1]) | (want == xt.shape[0])
+            q = qn[centres]
+            key = (xn[safe, 0] - q[:, None, 0]) ** 2
+            for j in range(1, xn.shape[1]):
+                key += (xn[safe, j] - q[:, None, j]) ** 2
+            key[~same] = np.inf
+            if graph and not loop:  # the centre itself out: mostly first
+                moved = np.nonzero(idx[:, 0] != centres)[0]
+                if moved.size:
+                    order = np.argsort(~same[moved], axis=1, kind='stable')
+                    order = np.concatenate([order[:, -1:], order[:, :-1]],
+                                           1)  # the centre's inf first
+                    key[moved] = np.take_along_axis(key[moved], order, 1)
+                    safe[moved] = np.take_along_axis(safe[moved], order, 1)
+                key, safe = key[:, 1:], safe[:, 1:]
+            # the tree's order is the rule's but for ties and rounding:
+            # sort only the rows where it is not
+            off = (key[:, 1:] < key[:, :-1]) | (
+                (key[:, 1:] == key[:, :-1]) & (safe[:, 1:] < safe[:, :-1]))
+            bad = np.nonzero(off.any(1))[0]
+            if bad.size:
+                order = np.lexsort((safe[bad], key[bad]), axis=-1)
+                key[bad] = np.take_along_axis(key[bad], order, 1)
+                safe[bad] = np.take_along_axis(safe[bad], order, 1)
+            reach = dist[:, -1] ** 2 * (1 - 1e-9)
+            done = whole | (key[:, k - 1] < reach)
+            nbrs.append(safe[done, :k].reshape(-1))
+            ctrs.append(np.repeat(centres[done], k))
+            retry.append(centres[~done])
+        rows_todo = np.concatenate(retry)
+        want *= 2
+    nbr, ctr = np.concatenate(nbrs), np.concatenate(ctrs)
+    order = np.argsort(ctr, kind='stable')  # rows kept their rank order
+    return _to_edge_index(nbr[order], ctr[order], x.device)
 
 
 def _radius_tree(x: Tensor, r: float, batch: Optional[Tensor], cap: int,
@@ -377,6 +417,157 @@ def _knn_dense(x: Tensor, k: int, batch: Optional[Tensor], loop: bool,
     nbr = out[qmask] + xptr[qb][:, None]  # rows in global centre order
     ctr = torch.arange(nbr.size(0), device=x.device)
     return torch.stack([nbr.reshape(-1), ctr.repeat_interleave(k)])
+
+
+# ----------------------------------------------------------------------------
+# grid path (GPU, 3-D points): a uniform grid per example, rings of cells
+# ----------------------------------------------------------------------------
+# points per occupied cell the grid aims at, as a share of k
+_CELL_SHARE = 0.5
+# candidates handled at once (about 24 bytes each)
+_GRID_CHUNK = 2 ** 24
+
+
+def _scatter_extreme(p: Tensor, index: Tensor, size: int, reduce: str):
+    out = p.new_zeros(size, p.size(1))
+    return out.scatter_reduce_(0, index[:, None].expand_as(p), p, reduce,
+                               include_self=False)
+
+
+def _grid_cells(xd, xb, size: int, k: int):
+    """Per example: the grid origin, cell size and cells per axis, with the
+    cell size set so that occupied cells hold about ``_CELL_SHARE * k``
+    points (refined once by the occupancy: surfaces fill few cells)."""
+    lo = _scatter_extreme(xd, xb, size, 'amin')
+    hi = _scatter_extreme(xd, xb, size, 'amax')
+    count = torch.bincount(xb, minlength=size).to(xd.dtype)
+    extent = (hi - lo).clamp_min(1e-12)
+    target = max(1.0, _CELL_SHARE * k)
+    h = (extent.prod(1) / count.clamp_min(1) * target).pow(1 / 3)
+    h = torch.maximum(h, extent.max(1).values / 1024)  # at most 1024^3
+    for _ in range(2):
+        dims = (extent / h[:, None]).floor().long() + 1
+        cell = ((xd - lo[xb]) / h[xb, None]).floor().long()
+        cell = torch.minimum(cell, dims[xb] - 1)
+        key = (cell[:, 0] * dims[xb, 1] + cell[:, 1]) * dims[xb, 2] \
+            + cell[:, 2] + xb * (1 << 31)
+        occupied = torch.bincount(torch.unique(key) >> 31,
+                                  minlength=size).to(xd.dtype)
+        mean = count / occupied.clamp_min(1)
+        # occupancy grows like h^2 on a surface
+        h = torch.maximum(h * (target / mean.clamp_min(1e-12)).sqrt(),
+                          extent.max(1).values / 1024)
+    dims = (extent / h[:, None]).floor().long() + 1
+    return lo, h, dims
+
+
+def _knn_grid(x: Tensor, k: int, batch: Optional[Tensor], loop: bool,
+              query: Optional[Tensor], query_batch: Optional[Tensor],
+              length: int) -> Tensor:
+    """:func:`knn` on a grid, on any device, by the rule of :func:`knn`
+    (float64 squared distance summed coordinate by coordinate, ties by
+    index), so its graph is the CPU path's. Each centre takes the points of
+    the cells within ``R`` cells of its own, which hold every point closer
+    than ``R`` cell sizes; a centre whose k-th neighbour is not closer is
+    asked again with ``R + 1``, and after ``R = 2`` with its whole
+    example."""
+    graph = query is None
+    device = x.device
+    xd = x.detach().double()
+    xb = torch.zeros(x.size(0), dtype=torch.long, device=device) \
+        if batch is None else batch
+    qd = xd if graph else query.detach().double()
+    qb = xb if graph else (torch.zeros(qd.size(0), dtype=torch.long,
+                                       device=device)
+                           if query_batch is None else query_batch)
+    lo, h, dims = _grid_cells(xd, xb, length, k)
+    volume = dims.prod(1)
+    base = torch.zeros(length + 1, dtype=torch.long, device=device)
+    base[1:] = volume.cumsum(0)
+
+    def cells(p, b):
+        c = ((p - lo[b]) / h[b, None]).floor().long()
+        return torch.minimum(c.clamp_min(0), dims[b] - 1)
+
+    def keys(c, b):
+        return base[b] + (c[..., 0] * dims[b, 1] + c[..., 1]) * dims[b, 2] \
+            + c[..., 2]
+    xkey = keys(cells(xd, xb), xb)
+    sorted_keys, order = xkey.sort(stable=True)
+    qcell = cells(qd, qb)
+    m = qd.size(0)
+    out = torch.empty(m, k, dtype=torch.long, device=device)
+    todo = torch.arange(m, device=device)
+    for ring in (1, 2, None):
+        if todo.numel() == 0:
+            break
+        b = qb[todo]
+        if ring is None:  # the whole example
+            start = torch.searchsorted(sorted_keys, base[b])[:, None]
+            end = torch.searchsorted(sorted_keys, base[b + 1])[:, None]
+        else:
+            steps = torch.arange(-ring, ring + 1, device=device)
+            offsets = torch.cartesian_prod(steps, steps, steps)
+            c = qcell[todo][:, None, :] + offsets[None]
+            inside = ((c >= 0) & (c < dims[b][:, None, :])).all(-1)
+            ckey = keys(c.clamp_min(0), b[:, None])
+            start = torch.searchsorted(sorted_keys, ckey)
+            end = torch.searchsorted(sorted_keys, ckey, right=True)
+            end = torch.where(inside, end, start)
+        counts = end - start
+        total = counts.sum(1)
+        done = torch.zeros(todo.numel(), dtype=torch.bool, device=device)
+        bounds = torch.cumsum(total, 0)
+        first = 0
+        while first < todo.numel():
+            # centres [first, last) hold at most _GRID_CHUNK candidates
+            limit = (bounds[first - 1] if first else 0) + _GRID_CHUNK
+            last = max(first + 1, int(torch.searchsorted(
+                bounds, torch.as_tensor(limit, device=device),
+                right=True)))
+            last = min(last, todo.numel())
+            rows = slice(first, last)
+            pair_count = counts[rows].reshape(-1)
+            pair = torch.repeat_interleave(
+                torch.arange(pair_count.numel(), device=device), pair_count)
+            pair_first = torch.cumsum(pair_count, 0) - pair_count
+            position = start[rows].reshape(-1)[pair] + (
+                torch.arange(pair.numel(), device=device) - pair_first[pair])
+            cand = order[position]
+            row = pair // counts.size(1)
+            centre = todo[rows][row]
+            if graph and not loop:
+                keep = cand != centre
+                cand, row, centre = cand[keep], row[keep], centre[keep]
+            diff = xd[cand] - qd[centre]
+            key = diff[:, 0].square()
+            for j in range(1, diff.size(1)):
+                key = key + diff[:, j].square()
+            # sort by (row, key, candidate): stable sorts, last key first
+            perm = cand.argsort(stable=True)
+            perm = perm[key[perm].argsort(stable=True)]
+            perm = perm[row[perm].argsort(stable=True)]
+            cand, row, key = cand[perm], row[perm], key[perm]
+            per_row = torch.bincount(row, minlength=last - first)
+            row_first = torch.cumsum(per_row, 0) - per_row
+            rank = torch.arange(row.numel(), device=device) - row_first[row]
+            enough = per_row >= k
+            kth = torch.full((last - first,), float('inf'),
+                             dtype=key.dtype, device=device)
+            at_k = rank == k - 1
+            kth[row[at_k]] = key[at_k]
+            if ring is None:
+                ok = enough
+            else:
+                reach = (ring * h[b[rows]]).square() * (1 - 1e-9)
+                ok = enough & (kth < reach)
+            take = (rank < k) & ok[row]
+            out[todo[rows][row[take]], rank[take]] = cand[take]
+            done[rows] = ok
+            first = last
+        todo = todo[~done]
+    ctr = torch.arange(m, device=device).repeat_interleave(k)
+    return torch.stack([out.reshape(-1), ctr])
 
 
 def _radius_dense(x: Tensor, r: float, batch: Optional[Tensor], cap: int,
@@ -562,9 +753,11 @@ def knn(x: Tensor, k: int, batch: Optional[Tensor] = None, loop: bool = False,
     if not graph and query.size(0) == 0:
         return _empty_edges(x.device)
     _check_k(k, sx, sq, graph, loop)
-    if _use_dense(x):
-        return _knn_dense(x, k, batch, loop, query, query_batch, sx.numel())
-    return _knn_tree(x, k, batch, loop, query, query_batch)
+    if not _use_dense(x):
+        return _knn_tree(x, k, batch, loop, query, query_batch)
+    if x.size(1) == 3:
+        return _knn_grid(x, k, batch, loop, query, query_batch, sx.numel())
+    return _knn_dense(x, k, batch, loop, query, query_batch, sx.numel())
 
 
 def radius(x: Tensor, r: float, batch: Optional[Tensor] = None,

@@ -9,15 +9,21 @@ functions of the same names without a compiled extension:
   ``offset`` larger than any distance inside an example, so a single tree
   never returns a neighbour from another example;
   :func:`fps` runs a numba kernel, parallel across examples;
-* on other devices (CUDA), the points are padded to a dense
-  ``[B, N_max, D]`` batch and searched with chunked :func:`torch.cdist` +
-  :func:`torch.topk` (about 256 MB per chunk); :func:`fps` is a loop over the
-  samples whose distance update is vectorised over all examples at once.
+* on other devices (CUDA), :func:`knn` of 3-D points sorts them into a
+  uniform grid per example and ranks the points of the cells around each
+  centre, with the same rule and so the same graph as on the CPU; other
+  dimensions and :func:`radius` pad the points to a dense
+  ``[B, N_max, D]`` batch searched with chunked :func:`torch.cdist` +
+  :func:`torch.topk` (about 256 MB per chunk); :func:`fps` is a loop over
+  the samples whose distance update is vectorised over all examples at
+  once.
 
 Edges follow PyG's ``source_to_target`` flow: ``edge_index[0]`` is the
 neighbour :math:`j` (an index into ``x``), ``edge_index[1]`` the centre
 :math:`i` (an index into ``x``, or into ``query`` when one is given). Edges are
 sorted by centre, and within a centre by distance (ties by neighbour index).
+The distance that ranks :func:`knn`'s neighbours is the float64 squared
+distance summed coordinate by coordinate, on every device.
 """
 import itertools
 import math
@@ -713,9 +719,12 @@ def knn(x: Tensor, k: int, batch: Optional[Tensor] = None, loop: bool = False,
     distance (ties by neighbour index). Note that this is the opposite row
     order of ``torch_cluster.knn(x, y)`` in the bipartite case.
 
-    On CPU one :class:`scipy.spatial.cKDTree` serves all examples; on CUDA a
-    padded batch is searched with chunked :func:`torch.cdist` +
-    :func:`torch.topk`.
+    The neighbours are ranked by the float64 squared distance summed
+    coordinate by coordinate, ties by index, on every device, so the graph
+    does not depend on it. On CPU one :class:`scipy.spatial.cKDTree` serves
+    all examples; on other devices 3-D points are searched in a grid of
+    cells per example, other dimensions in a padded batch with chunked
+    :func:`torch.cdist` + :func:`torch.topk`.
 
     Args:
         x (torch.Tensor): Point coordinates, float32 or float64, any

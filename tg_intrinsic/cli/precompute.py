@@ -32,7 +32,9 @@ EXAMPLE = """examples:
   tg-intrinsic precompute gravo scans/ cache/gravo --ratio 8 --lower-bound 500
 
 Run "tg-intrinsic precompute KIND --help" for the options of each kind.
-Rerunning the same command resumes: files already written are skipped."""
+Rerunning the same command resumes: files already written are skipped.
+Runs on the CPU, one process per --workers (numba and scipy kernels); the
+saved tensors load onto any device."""
 
 MANIFEST = 'precompute.json'
 FAILURES = 'failures.json'

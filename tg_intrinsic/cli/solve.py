@@ -35,7 +35,12 @@ EXAMPLE = """examples:
 
 A signal is a .npy, .txt or .csv file with one row per vertex (one or more
 columns), FILE.ply:NAME (vertex property NAME of a PLY file with the same
-vertices) or NAME alone (a vertex property of MESH)."""
+vertices) or NAME alone (a vertex property of MESH).
+
+Every step runs on the CPU: the Laplacians (scipy, robust-laplacian), the
+hierarchy (numba) and the cycles (pyamg's compiled Gauss-Seidel sweeps).
+From Python, GravoMG.solve also takes CUDA tensors (its torch backend,
+with Chebyshev smoothing)."""
 
 
 def add_arguments(parser):

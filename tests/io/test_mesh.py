@@ -371,3 +371,11 @@ def test_welding_keeps_the_first_copy_and_gives_the_inverse(tmp_path):
     # a point cloud is kept as it is
     mf.write_ply(str(path), np.concatenate([V, V]))
     assert len(mf.read_surface(str(path))[0]) == 2 * len(V)
+
+
+def test_a_signal_that_is_not_npy_is_named(tmp_path):
+    (tmp_path / 'signal.npy').write_bytes(b'\x00garbage' * 20)
+    with pytest.raises(ValueError, match=r"signal.npy': it is not a NumPy "
+                                         r".npy file") as error:
+        mf.read_signal(str(tmp_path / 'signal.npy'), 4)
+    assert 'pickle' not in str(error.value)

@@ -151,3 +151,13 @@ def test_bad_point_clouds_name_the_file(tmp_path):
         read_points(str(tmp_path / 'n.ply'))
     with pytest.raises(FileNotFoundError, match=r"gone\.xyz"):
         read_points(str(tmp_path / 'gone.xyz'))
+
+
+def test_a_file_that_is_not_npy_is_named_without_pickle_advice(tmp_path):
+    from tg_intrinsic.io import read_points
+    path = tmp_path / 'cloud.npy'
+    path.write_bytes(b'not numpy at all' * 8)
+    with pytest.raises(ValueError, match=r"could not read '.*cloud.npy': "
+                                         r"it is not a NumPy .npy file; "
+                                         r"write it with numpy.save$"):
+        read_points(str(path))

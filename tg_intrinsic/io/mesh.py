@@ -10,6 +10,8 @@ import numpy as np
 
 from tg_intrinsic.utils import atomic_write
 
+from .hdr import read_npy
+
 MESH_EXTENSIONS = ('.obj', '.off', '.ply', '.stl')
 SIGNAL_EXTENSIONS = ('.npy', '.txt', '.csv')
 # PLY vertex properties that are the geometry itself, not a signal
@@ -345,15 +347,15 @@ def read_signal(source: str, num_vertices: int,
     elif osp.splitext(source)[1].lower() in SIGNAL_EXTENSIONS:
         if not osp.isfile(source):
             raise FileNotFoundError(f"signal file '{source}' does not exist")
-        try:
-            if source.lower().endswith('.npy'):
-                values = np.load(source, allow_pickle=False)
-            else:
+        if source.lower().endswith('.npy'):
+            values = read_npy(source)  # names what is wrong with the file
+        else:
+            try:
                 values = np.loadtxt(source, delimiter=',' if source.lower(
                 ).endswith('.csv') else None, ndmin=1)
-        except (OSError, ValueError) as error:
-            raise ValueError(f"could not read the signal '{source}': "
-                             f"{error}") from error
+            except (OSError, ValueError) as error:
+                raise ValueError(f"could not read the signal '{source}': "
+                                 f"{error}") from error
     elif source in properties:
         values = properties[source]
     else:

@@ -8,6 +8,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
+from .hdr import read_npy
 from .mesh import read_surface
 
 POINT_EXTENSIONS = ('.ply', '.txt', '.xyz', '.npy', '.pts')
@@ -29,22 +30,22 @@ def read_table(path: str, max_rows: Optional[int] = None) -> np.ndarray:
     path = os.fspath(path)
     if not osp.isfile(path):
         raise FileNotFoundError(f"'{path}' does not exist")
-    try:
-        if path.lower().endswith('.npy'):
-            table = np.load(path, allow_pickle=False)
-            if table.ndim == 1:
-                table = table[:, None]
-            if max_rows is not None:
-                table = table[:max_rows]
-        else:
+    if path.lower().endswith('.npy'):
+        table = read_npy(path)  # names what is wrong with the file
+        if table.ndim == 1:
+            table = table[:, None]
+        if max_rows is not None:
+            table = table[:max_rows]
+    else:
+        try:
             with open(path, 'rb') as f:
                 comma = b',' in f.read(4096)
             with warnings.catch_warnings():  # an empty file: error below
                 warnings.simplefilter('ignore', UserWarning)
                 table = np.loadtxt(path, delimiter=',' if comma else None,
                                    ndmin=2, max_rows=max_rows)
-    except (OSError, ValueError) as error:
-        raise ValueError(f"could not read '{path}': {error}") from error
+        except (OSError, ValueError) as error:
+            raise ValueError(f"could not read '{path}': {error}") from error
     if table.ndim != 2 or table.size == 0:
         raise ValueError(f"'{path}' holds no table of numbers (shape "
                          f"{table.shape}); give one row per point")

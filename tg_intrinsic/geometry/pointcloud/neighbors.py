@@ -441,9 +441,12 @@ def _scatter_extreme(p: Tensor, index: Tensor, size: int, reduce: str):
 
 
 def _grid_cells(xd, xb, size: int, k: int):
-    """Per example: the grid origin, cell size and cells per axis, with the
-    cell size set so that occupied cells hold about ``_CELL_SHARE * k``
-    points (refined once by the occupancy: surfaces fill few cells)."""
+    r"""Per example: the grid origin, cell size and cells per axis, with the
+    cell size set so that the cell of a point holds about
+    ``_CELL_SHARE * k`` points: the occupancy seen from the points
+    (:math:`\sum c^2 / \sum c` over the cells' counts :math:`c`, which dense
+    regions dominate), refined twice from a volume estimate; surfaces fill
+    few cells."""
     lo = _scatter_extreme(xd, xb, size, 'amin')
     hi = _scatter_extreme(xd, xb, size, 'amax')
     count = torch.bincount(xb, minlength=size).to(xd.dtype)
@@ -457,11 +460,12 @@ def _grid_cells(xd, xb, size: int, k: int):
         cell = torch.minimum(cell, dims[xb] - 1)
         key = (cell[:, 0] * dims[xb, 1] + cell[:, 1]) * dims[xb, 2] \
             + cell[:, 2] + xb * (1 << 31)
-        occupied = torch.bincount(torch.unique(key) >> 31,
-                                  minlength=size).to(xd.dtype)
-        mean = count / occupied.clamp_min(1)
-        # occupancy grows like h^2 on a surface
-        h = torch.maximum(h * (target / mean.clamp_min(1e-12)).sqrt(),
+        cells, per_cell = torch.unique(key, return_counts=True)
+        seen = torch.zeros(size, dtype=xd.dtype, device=xd.device)
+        seen.index_add_(0, cells >> 31, per_cell.to(xd.dtype).square())
+        seen = seen / count.clamp_min(1)
+        # occupancy grows like h^2 on a surface, h^3 in a volume
+        h = torch.maximum(h * (target / seen.clamp_min(1e-12)).pow(0.4),
                           extent.max(1).values / 1024)
     dims = (extent / h[:, None]).floor().long() + 1
     return lo, h, dims

@@ -333,7 +333,8 @@ def _read_manifest(path: str) -> Optional[Dict]:
     try:
         with open(path) as f:
             old = json.load(f)
-        old['kind'], old['settings']  # noqa: B018 - both must be there
+        if not {'kind', 'settings'} <= set(old):
+            raise KeyError('kind and settings')
         return old
     except (OSError, ValueError, KeyError, TypeError) as error:
         raise UsageError(f"cannot read '{path}' ({one_line(error)}); "
@@ -351,17 +352,10 @@ def _changes(old: Dict, manifest: Dict) -> List[str]:
 def _foreign_files(output: str, owned_results: bool) -> List[str]:
     """Files under ``output`` that precompute did not write: all but its
     manifest, failure list and (when a manifest owns them) .pt files."""
-    from tg_intrinsic.io.results import RECORD
-    found = []
-    for root, dirs, files in os.walk(output):
-        dirs.sort()
-        for name in sorted(files):
-            rel = os.path.relpath(os.path.join(root, name), output)
-            if rel in (MANIFEST, FAILURES, RECORD) or (
-                    owned_results and name.endswith('.pt')):
-                continue
-            found.append(rel)
-    return found
+    from tg_intrinsic.io.results import RECORD, files_under
+    return [name for name in files_under(output)
+            if name not in (MANIFEST, FAILURES, RECORD) and not (
+                owned_results and name.endswith('.pt'))]
 
 
 def choose_folder(output: str, manifest: Dict, overwrite: bool,
@@ -382,7 +376,7 @@ def choose_folder(output: str, manifest: Dict, overwrite: bool,
                          f"with --overwrite to recompute every file, or "
                          f"give another OUTPUT")
     owned = os.path.exists(os.path.join(output, MANIFEST))
-    foreign = _foreign_files(output, owned) if os.path.isdir(output) else []
+    foreign = _foreign_files(output, owned)
     if foreign and not overwrite:
         unknown = [name for name in foreign if name.endswith('.pt')]
         if unknown:

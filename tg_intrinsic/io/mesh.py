@@ -4,6 +4,7 @@ per-vertex properties out, per-vertex signals from ``.npy``, text or PLY
 properties."""
 import os
 import os.path as osp
+import warnings
 from typing import Dict, Optional, Tuple
 
 import numpy as np
@@ -127,8 +128,6 @@ def _weld(path: str, pos: np.ndarray, face: np.ndarray,
           properties: Dict[str, np.ndarray]):
     """Merges the vertices at the same position (warning how many);
     ``(pos, face, properties, inverse)``."""
-    import warnings
-
     import torch
 
     from tg_intrinsic.geometry import weld_vertices

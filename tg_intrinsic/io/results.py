@@ -17,6 +17,8 @@ import tempfile
 from contextlib import contextmanager
 from typing import Iterable, Iterator, List, Optional, Set
 
+from tg_intrinsic.utils import atomic_write_json
+
 # The record of the files a run wrote, in every result folder.
 RECORD = '.tg-intrinsic.json'
 _STAGING = '.partial-'
@@ -71,8 +73,9 @@ def recorded_files(path: str, command: str) -> Optional[Set[str]]:
         return None
 
 
-def _files_under(path: str) -> List[str]:
-    """Every file and link under ``path`` as relative paths, sorted."""
+def files_under(path: str) -> List[str]:
+    """Every file and link under ``path`` as relative paths, sorted
+    (empty for a missing folder)."""
     found = []
     for root, dirs, files in os.walk(path):
         dirs.sort()
@@ -88,7 +91,7 @@ def foreign_files(path: str, command: str) -> List[str]:
     if not os.path.isdir(path):
         return []
     own = recorded_files(path, command) or set()
-    return [name for name in _files_under(path)
+    return [name for name in files_under(path)
             if name not in own and name != RECORD]
 
 
@@ -116,7 +119,6 @@ def claim_folder(path: str, command: str, overwrite: bool = False,
 
 def write_record(path: str, command: str, files: Iterable[str]) -> None:
     """Records in ``path`` that ``command`` wrote ``files`` there."""
-    from tg_intrinsic.utils import atomic_write_json
     atomic_write_json(os.path.join(path, RECORD),
                       {'command': command, 'files': sorted(set(files))})
 
@@ -150,7 +152,7 @@ def commit_folder(staging: str, path: str, command: str) -> None:
     (foreign files, or the working directory inside) file by file,
     keeping the foreign files and removing the files of the earlier run
     that this one did not write again."""
-    files = [name for name in _files_under(staging) if name != RECORD]
+    files = [name for name in files_under(staging) if name != RECORD]
     write_record(staging, command, files)
     if not os.path.exists(path):
         os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)

@@ -440,6 +440,13 @@ def _scatter_extreme(p: Tensor, index: Tensor, size: int, reduce: str):
                                include_self=False)
 
 
+def _cell_index(cell: Tensor, dims: Tensor) -> Tensor:
+    """The linear index of integer cells ``(..., 3)`` in grids of
+    ``dims`` ``(..., 3)`` cells per axis."""
+    return (cell[..., 0] * dims[..., 1] + cell[..., 1]) * dims[..., 2] \
+        + cell[..., 2]
+
+
 def _grid_cells(xd, xb, size: int, k: int):
     r"""Per example: the grid origin, cell size and cells per axis, with the
     cell size set so that the cell of a point holds about
@@ -458,8 +465,7 @@ def _grid_cells(xd, xb, size: int, k: int):
         dims = (extent / h[:, None]).floor().long() + 1
         cell = ((xd - lo[xb]) / h[xb, None]).floor().long()
         cell = torch.minimum(cell, dims[xb] - 1)
-        key = (cell[:, 0] * dims[xb, 1] + cell[:, 1]) * dims[xb, 2] \
-            + cell[:, 2] + xb * (1 << 31)
+        key = _cell_index(cell, dims[xb]) + xb * (1 << 31)
         cells, per_cell = torch.unique(key, return_counts=True)
         seen = torch.zeros(size, dtype=xd.dtype, device=xd.device)
         seen.index_add_(0, cells >> 31, per_cell.to(xd.dtype).square())
@@ -500,8 +506,7 @@ def _knn_grid(x: Tensor, k: int, batch: Optional[Tensor], loop: bool,
         return torch.minimum(c.clamp_min(0), dims[b] - 1)
 
     def keys(c, b):
-        return base[b] + (c[..., 0] * dims[b, 1] + c[..., 1]) * dims[b, 2] \
-            + c[..., 2]
+        return base[b] + _cell_index(c, dims[b])
     xkey = keys(cells(xd, xb), xb)
     sorted_keys, order = xkey.sort(stable=True)
     qcell = cells(qd, qb)

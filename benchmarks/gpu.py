@@ -181,8 +181,10 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--device', default='cuda')
     parser.add_argument('--quick', action='store_true')
-    parser.add_argument('--out', default=os.path.join(HERE, 'results',
-                                                      'gpu.json'))
+    parser.add_argument('--out', help='the JSON (default: '
+                        'benchmarks/results/gpu.json for a full run on '
+                        'CUDA, a file in the temporary folder otherwise, '
+                        'so a check never becomes the results)')
     args = parser.parse_args(argv)
     if args.device.startswith('cuda') and not torch.cuda.is_available():
         # (make benchmarks runs every script)
@@ -190,6 +192,10 @@ def main(argv=None):
               '(--device cpu --quick checks the script)')
         return 0
     device = resolve_device(args.device, '--device')
+    if args.out is None:
+        args.out = os.path.join(HERE, 'results', 'gpu.json') if (
+            device.type == 'cuda' and not args.quick) else os.path.join(
+            tempfile.gettempdir(), 'tg_intrinsic_gpu_check.json')
     started = time.perf_counter()
     results = {'device': torch.cuda.get_device_name(device)
                if device.type == 'cuda' else 'cpu',
@@ -221,6 +227,7 @@ def main(argv=None):
     results['seconds'] = round(time.perf_counter() - started, 1)
     atomic_write_json(args.out, results)
     print(json.dumps(results['met']))
+    print(f'written to {args.out}')
     return 0
 
 

@@ -133,13 +133,20 @@ def strip_ext(name: str) -> str:
 
 # ---------------------------------------------------------------- registry
 ROWS: Dict[str, Callable[[dict, dict], List[Row]]] = {}
+# benchmarks that need hardware this machine may lack: their row says what
+# is not verified while no JSON exists
+UNVERIFIED: Dict[str, Row] = {}
 
 
-def rows_for(name: str):
+def rows_for(name: str, unverified: Row = None):
     """Registers the row function of ``benchmarks/results/<name>.json``; the
-    table lists the benchmarks in the order of registration."""
+    table lists the benchmarks in the order of registration. With
+    ``unverified`` (claim, script, result), a missing JSON gives that row
+    instead of an error."""
     def register(function):
         ROWS[name] = function
+        if unverified is not None:
+            UNVERIFIED[name] = unverified
         return function
     return register
 
@@ -1387,6 +1394,83 @@ def ddp_training(d, _):
     return rows
 
 
+
+# -------------------------------------------------------------------- gpu
+GPU_CLAIM = 'CUDA: the test suite on the GPU, and the GPU speed goals'
+
+
+def goal_text(value: float, goal: float, fmt: Callable[[float], str],
+              at_least: bool = False) -> str:
+    met = value >= goal if at_least else value <= goal
+    return (f"{fmt(value)} (goal {'>=' if at_least else '<='} {fmt(goal)}, "
+            f"{'met' if met else '**not met**'})")
+
+
+def two_digits(x: float) -> str:
+    """150, 12, 0.8: two significant digits, no trailing zeros."""
+    return f'{float(f"{x:.2g}"):g}'
+
+
+def milliseconds(x: float) -> str:
+    return f'{two_digits(1e3 * x)} ms'
+
+
+def in_seconds(x: float) -> str:
+    return f'{two_digits(x)} s' if x < 10 else f'{seconds(x)} s'
+
+
+@rows_for('gpu', unverified=(
+    GPU_CLAIM, 'gpu.py', 'not verified: no GPU run has written '
+    'benchmarks/results/gpu.json yet'))
+def gpu(d, _):
+    """Written only by a run on a CUDA device (``benchmarks/gpu.py``)."""
+    if d['quick'] or d['device'] == 'cpu':
+        raise ValueError('gpu.json is a --quick or CPU check, not the '
+                         'results: run benchmarks/gpu.py on a GPU')
+    goals = d['goals']
+    parts = []
+    failed = [f"{name} failed ({d[name]['error'][:60]})" for name in (
+        'device_tests', 'neighbours', 'networks', 'uncertainty', 'svbrdf',
+        'epochs') if 'error' in d[name]]
+    if 'error' not in d['device_tests']:
+        t = d['device_tests']
+        parts.append(f"`pytest --device cuda`: {t['summary']}")
+    if 'error' not in d['neighbours']:
+        n = d['neighbours']
+        parts.append(
+            f"knn on 100k points {goal_text(n['knn_100k_s'], goals['knn_100k_s'], milliseconds)}, "  # noqa: E501
+            f"on 32 x 1024 {goal_text(n['knn_32x1024_s'], goals['knn_32x1024_s'], milliseconds)}, "  # noqa: E501
+            f"{'the same' if n['knn_same_graph_as_cpu'] else '**not the same**'} "  # noqa: E501
+            f"graph as the CPU; MLS operators {in_seconds(n['mls_100k_s'])} / "
+            f"{milliseconds(n['mls_32x1024_s'])}")
+    if 'error' not in d['networks']:
+        n = d['networks']
+        parts.append(
+            f"DeltaNet step on 32 x 1024, operators in the forward, "
+            f"{goal_text(n['deltanet_step_s'], goals['deltanet_step_s'], milliseconds)}, "  # noqa: E501
+            f"EdgeConv DGCNN {milliseconds(n['dgcnn_step_s'])}: "
+            f"{goal_text(n['deltanet_vs_dgcnn'], goals['deltanet_vs_dgcnn'], lambda x: times(x, 2), True)}")  # noqa: E501
+    if 'error' not in d['uncertainty']:
+        u = d['uncertainty']['spectral_uncertainty_100k_s']
+        parts.append(f"spectral uncertainty of 100k points "
+                     f"{goal_text(u, goals['spectral_uncertainty_100k_s'], milliseconds)}")  # noqa: E501
+    if 'error' not in d['svbrdf']:
+        s = d['svbrdf']
+        parts.append(f"`svbrdf --refine 10` on 2562 points x 25 views "
+                     f"{in_seconds(s['svbrdf_device']['wall_s'])} vs "
+                     f"{in_seconds(s['svbrdf_cpu']['wall_s'])} on its CPU "
+                     f"({times(s['svbrdf_speedup'], 2)})")
+    if 'error' not in d['epochs']:
+        e = d['epochs']
+        parts.append(
+            f"SHREC'11-protocol epochs: DeltaNet "
+            f"{goal_text(e['deltanet_epoch_s'], goals['deltanet_epoch_s'], in_seconds)}, "  # noqa: E501
+            f"HSN {goal_text(e['hsn_epoch_s'], goals['hsn_epoch_s'], in_seconds)}")  # noqa: E501
+    text = f"{d['device']}, {in_seconds(d['seconds'])} in all: " + \
+        '; '.join(parts + failed)
+    return [(GPU_CLAIM, 'gpu.py', text.replace('|', '/'))]
+
+
 def load_results(directory: str) -> Dict[str, dict]:
     results = {}
     for path in sorted(glob.glob(os.path.join(directory, '*.json'))):
@@ -1403,7 +1487,7 @@ def build_table(directory: str = RESULTS) -> str:
         raise ReportError(
             f"no row function for {', '.join(n + '.json' for n in unknown)} "
             f"in {directory}: add one to benchmarks/report.py (@rows_for)")
-    missing = [n for n in ROWS if n not in results]
+    missing = [n for n in ROWS if n not in results and n not in UNVERIFIED]
     if missing:
         raise ReportError(
             f"no results for {', '.join(n + '.json' for n in missing)} in "
@@ -1411,7 +1495,8 @@ def build_table(directory: str = RESULTS) -> str:
     lines = [HEADER]
     for name, function in ROWS.items():
         try:
-            rows = function(results[name], results)
+            rows = [UNVERIFIED[name]] if name not in results else \
+                function(results[name], results)
         except (KeyError, IndexError, TypeError, ValueError, AttributeError,
                 ZeroDivisionError) as error:
             raise ReportError(f"{name}.json does not have what its row "

@@ -52,7 +52,8 @@ def test_readme_matches_the_results():
 def test_every_result_has_a_row():
     names = sorted(os.path.splitext(n)[0] for n in os.listdir(RESULTS)
                    if n.endswith('.json'))
-    assert sorted(report.ROWS) == names
+    assert sorted(set(report.ROWS) - (set(report.UNVERIFIED) - set(names))
+                  ) == names
     table = report.build_table(RESULTS)
     for name in names:
         assert f'`{name}.py`' in table
@@ -252,3 +253,66 @@ def test_the_gravo_scale_row_follows_its_numbers(copies):
                if line not in before.split('\n')]
     assert len(changed) == 1 and 'gravo_scale.py' in changed[0]
     assert '**1.37x**' in changed[0] and '4321 vs' in changed[0]
+
+
+def gpu_results(**changes):
+    """A gpu.json as benchmarks/gpu.py writes it on CUDA."""
+    data = {
+        'device': 'NVIDIA H200', 'quick': False, 'seconds': 412.0,
+        'goals': report_goals(),
+        'device_tests': {'exit_code': 0, 'summary': '31 passed in 80s'},
+        'neighbours': {'knn_100k_s': 0.15, 'knn_32x1024_s': 0.012,
+                       'mls_100k_s': 0.4, 'mls_32x1024_s': 0.02,
+                       'knn_same_graph_as_cpu': True},
+        'networks': {'deltanet_step_s': 0.040, 'dgcnn_step_s': 0.070,
+                     'deltanet_vs_dgcnn': 1.75},
+        'uncertainty': {'spectral_uncertainty_100k_s': 0.0008},
+        'svbrdf': {'svbrdf_device': {'wall_s': 6.0},
+                   'svbrdf_cpu': {'wall_s': 18.0}, 'svbrdf_speedup': 3.0},
+        'epochs': {'deltanet_epoch_s': 0.7, 'hsn_epoch_s': 5.5}}
+    data.update(changes)
+    return data
+
+
+def report_goals():
+    spec = importlib.util.spec_from_file_location(
+        'gpu_benchmark', os.path.join(ROOT, 'benchmarks', 'gpu.py'))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.GOALS
+
+
+def test_the_gpu_row_says_not_verified_without_its_json(copies):
+    results, _ = copies
+    if (results / 'gpu.json').exists():
+        os.remove(results / 'gpu.json')
+    table = report.build_table(str(results))
+    row = [line for line in table.splitlines() if '`gpu.py`' in line]
+    assert len(row) == 1 and 'not verified' in row[0]
+
+
+def test_the_gpu_row_follows_its_numbers(copies):
+    results, _ = copies
+    (results / 'gpu.json').write_text(json.dumps(gpu_results()))
+    row = [line for line in report.build_table(str(results)).splitlines()
+           if '`gpu.py`' in line][0]
+    assert 'not verified' not in row and 'NVIDIA H200' in row
+    assert '31 passed' in row
+    assert '150 ms (goal <= 200 ms, met)' in row          # knn 100k
+    assert '12 ms (goal <= 10 ms, **not met**)' in row    # knn 32 x 1024
+    assert '1.75x (goal >= 1.50x, met)' in row            # vs DGCNN
+    assert '0.8 ms (goal <= 1 ms, met)' in row
+    assert 'HSN 5.5 s (goal <= 5 s, **not met**)' in row
+    failed = gpu_results(epochs={'error': 'RuntimeError: out of memory'})
+    (results / 'gpu.json').write_text(json.dumps(failed))
+    row = [line for line in report.build_table(str(results)).splitlines()
+           if '`gpu.py`' in line][0]
+    assert 'epochs failed (RuntimeError: out of memory)' in row
+
+
+def test_a_gpu_check_on_the_cpu_is_not_taken_for_results(copies):
+    results, _ = copies
+    (results / 'gpu.json').write_text(json.dumps(gpu_results(
+        device='cpu', quick=True)))
+    with pytest.raises(report.ReportError, match='not the results'):
+        report.build_table(str(results))

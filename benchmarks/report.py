@@ -1394,7 +1394,6 @@ def ddp_training(d, _):
     return rows
 
 
-
 # -------------------------------------------------------------------- gpu
 GPU_CLAIM = 'CUDA: the test suite on the GPU, and the GPU speed goals'
 

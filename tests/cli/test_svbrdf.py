@@ -85,11 +85,16 @@ def test_recovery_writes_maps_plys_figures_and_report(scene, tmp_path,
     assert report['triangles'] == 320
     seen = report['observations_per_point']
     assert 0 <= seen['min'] <= seen['mean'] <= seen['max'] <= 8
-    assert set(report['seconds']) >= {'read', 'project', 'fit', 'write',
-                                      'total'}
+    # --steps asks for the SH fit before the default refinement
+    assert set(report['seconds']) >= {'read', 'project', 'fit', 'refine',
+                                      'write', 'total'}
+    assert report['pipeline']['steps'] == [
+        'project', 'fit_spherical_harmonics', 'spectral_uncertainty', 'fit',
+        'refine']
+    assert report['pipeline']['refine']['visibility'] == 'geometry'
     assert report['options']['steps'] == 3
     assert report['options']['l_max'] == 5
-    assert np.isfinite(report['final_loss'])
+    assert np.isfinite(report['loss']['refine']).all()
     assert 0 <= report['mean_entropy'] <= 1
     truth = report['ground_truth']
     for key in ('roughness_mae', 'base_color_rmse', 'metallic_mae'):
@@ -113,7 +118,7 @@ def test_subprocess_with_options(scene, tmp_path):
     report = json.loads((out / 'report.json').read_text())
     assert report['options']['l_max'] == 8  # split_sum's default
     assert report['options']['metallic'] == 1.0
-    assert report['options']['solver'] == 'adam'
+    assert report['options']['solver'] == 'lm'
     assert np.allclose(np.load(out / 'maps.npz')['metallic'], 1.0)
 
 
@@ -125,20 +130,22 @@ def test_levenberg_marquardt_solver(scene, tmp_path):
     report = json.loads((out / 'report.json').read_text())
     assert report['options']['solver'] == 'lm'
     assert report['options']['steps'] == DEFAULT_STEPS['lm']
-    assert report['final_loss'] < report['initial_loss']
+    assert report['loss']['fit'][1] < report['loss']['fit'][0]
 
 
 def test_refinement_against_the_full_integral(scene, tmp_path):
     plain, refined = tmp_path / 'plain', tmp_path / 'refined'
     assert run(['svbrdf', str(scene), '--out', str(plain), '--solver', 'lm',
-                '--metallic', '1', '--quiet']) == 0
+                '--metallic', '1', '--refine', '0', '--quiet']) == 0
     assert run(['svbrdf', str(scene), '--out', str(refined), '--solver',
                 'lm', '--metallic', '1', '--refine', '5', '--quiet']) == 0
     before = json.loads((plain / 'report.json').read_text())
     after = json.loads((refined / 'report.json').read_text())
     assert after['options']['refine'] == 5 and 'refine' in after['seconds']
-    assert 'refine' not in before['seconds'] and before['refine_loss'] is None
-    assert after['refine_loss'][1] < after['refine_loss'][0]
+    assert 'refine' not in before['seconds'] and 'refine' not in \
+        before['loss']
+    assert before['pipeline']['not_refined_because'] == 'not asked for'
+    assert after['loss']['refine'][1] < after['loss']['refine'][0]
     # the example is rendered with the full integral: refining gets closer
     assert after['ground_truth']['roughness_mae'] \
         < before['ground_truth']['roughness_mae']
@@ -402,3 +409,38 @@ def test_nothing_to_fit(scene, tmp_path, capsys):
     one_line_error(capsys, f"no photograph listed in "
                    f"'{copy / 'cameras.json'}' has a pixel above 0")
     assert not (tmp_path / 'o').exists()
+
+
+@pytest.fixture(scope='module')
+def point_scene(scene, tmp_path_factory):
+    """The example with its mesh replaced by the bare points (with
+    normals): a point cloud, whose occlusion is unknown."""
+    from tg_intrinsic.io import write_ply
+    folder = tmp_path_factory.mktemp('points') / 'scene'
+    shutil.copytree(scene, folder)
+    pos, _, properties = read_surface(folder / 'geometry.ply')
+    write_ply(str(folder / 'geometry.ply'), pos, None,
+              {k: properties[k] for k in ('nx', 'ny', 'nz')})
+    return folder
+
+
+def test_a_point_cloud_is_refined_only_when_told_it_is_convex(
+        point_scene, tmp_path, capsys):
+    out = tmp_path / 'out'
+    assert run(['svbrdf', str(point_scene), '--out', str(out)]) == 0
+    assert 'not refined: a point cloud without a mesh' in \
+        capsys.readouterr().out
+    report = json.loads((out / 'report.json').read_text())
+    assert report['triangles'] is None
+    assert report['pipeline']['steps'][-1] == 'fit'
+    assert report['options']['refine'] == 0
+    assert run(['svbrdf', str(point_scene), '--out', str(out), '--refine',
+                '2', '--quiet']) == 2
+    one_line_error(capsys, 'the refinement cannot run: a point cloud '
+                   'without a mesh', 'horizon visibility')
+    assert run(['svbrdf', str(point_scene), '--out', str(out), '--refine',
+                '2', '--visibility', 'horizon', '--quiet']) == 0
+    report = json.loads((out / 'report.json').read_text())
+    assert report['pipeline']['refine'] == {'steps': 2,
+                                            'visibility': 'horizon'}
+    assert report['options']['visibility'] == 'horizon'

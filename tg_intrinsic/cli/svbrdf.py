@@ -30,10 +30,7 @@ HELP = 'recover SVBRDF maps and their uncertainty from HDR photographs'
 
 MAP_NAMES = ('base_color', 'metallic', 'roughness', 'entropy')
 SPECULAR_MODELS = ('eq5.11', 'split_sum')
-# SH degree per specular model when --l-max is not given: the paper's
-# eq. 5.11 at FitSphericalHarmonics' default, the split sum at 8 (as in
-# benchmarks/svbrdf_accuracy.py and the README's results)
-SPLIT_SUM_L_MAX = 8
+VISIBILITY = ('auto', 'geometry', 'horizon')
 # the synthetic example: an icosphere of 642 vertices seen by 24 cameras
 EXAMPLE_SUBDIVISIONS = 3
 EXAMPLE_VIEWS = 24
@@ -90,10 +87,10 @@ def _l_max_type(samples: int):
 def add_arguments(parser):
     from tg_intrinsic.nn import FrequencySVBRDF
     from tg_intrinsic.transforms import FitSphericalHarmonics
-    from tg_intrinsic.nn.frequency_svbrdf import DEFAULT_STEPS, SOLVERS
-    solver = default_of(FrequencySVBRDF.fit, 'solver')
-    tv_weight = default_of(FrequencySVBRDF.fit, 'tv_weight')
-    l_max = default_of(FitSphericalHarmonics.__init__, 'l_max')
+    from tg_intrinsic.nn.frequency_svbrdf import (DEFAULT_L_MAX,
+                                                  DEFAULT_STEPS,
+                                                  REFINE_STEPS, SOLVERS)
+    tv_weight = default_of(FrequencySVBRDF.recover, 'tv_weight')
     l_max_type = _l_max_type(default_of(FitSphericalHarmonics.__init__,
                                         'num_light_samples'))
     parser.add_argument('scene', nargs='?', metavar='SCENE_DIR',
@@ -105,10 +102,13 @@ def add_arguments(parser):
                         help='write into --out (or --write-example DIR) even '
                         'when it holds files that svbrdf did not write: '
                         'those are kept, files of the same name replaced')
-    parser.add_argument('--solver', choices=SOLVERS, default=solver,
-                        help=f'adam: gradient descent on all points (the '
-                        f'original\'s); lm: Levenberg-Marquardt per point, '
-                        f'a lower objective sooner (default: {solver})')
+    parser.add_argument('--solver', choices=SOLVERS, default=None,
+                        help='solver of the spherical-harmonic fit: lm, '
+                        'Levenberg-Marquardt per point (the default); adam, '
+                        'gradient descent on all points (the original\'s). '
+                        'Before a refinement the fit runs only when '
+                        '--solver or --steps is given: the refinement '
+                        'starts from the spectrum on its own')
     parser.add_argument('--steps', type=nonnegative_int, default=None,
                         metavar='N',
                         help='Adam steps, or Levenberg-Marquardt iterations '
@@ -120,8 +120,9 @@ def add_arguments(parser):
                         metavar='L',
                         help=f'spherical-harmonic degree of the light and '
                         f'the observations, 1 to {l_max_type.largest} '
-                        f'(default: {l_max} for eq5.11, {SPLIT_SUM_L_MAX} '
-                        f'for split_sum)')
+                        f'(default: ' + ', '.join(
+                            f'{n} for {m}' for m, n in DEFAULT_L_MAX.items())
+                        + ')')
     parser.add_argument('--specular-model', choices=SPECULAR_MODELS,
                         default=SPECULAR_MODELS[0],
                         help='eq5.11: the paper\'s model; split_sum: '
@@ -136,13 +137,22 @@ def add_arguments(parser):
                         help=f'total-variation weight over the surface '
                         f'graph, smoothing the maps (default: '
                         f'{tv_weight:g})')
-    parser.add_argument('--refine', type=nonnegative_int, default=0,
+    parser.add_argument('--refine', type=nonnegative_int, default=None,
                         metavar='N',
-                        help='then refine the maps against the full '
-                        'integral of the environment light with N '
-                        'Levenberg-Marquardt iterations per round, from the '
-                        'spherical-harmonic result (slower, more accurate; '
-                        '0: no refinement) (default: 0)')
+                        help=f'refine the maps against the full integral of '
+                        f'the environment light with N Levenberg-Marquardt '
+                        f'iterations per round (the lowest error); 0: the '
+                        f'spherical-harmonic recovery alone, the paper\'s '
+                        f'(default: {REFINE_STEPS} when the scene has a mesh '
+                        f'or --visibility horizon is given, else 0)')
+    parser.add_argument('--visibility', choices=VISIBILITY,
+                        default=VISIBILITY[0],
+                        help='occlusion of the light in the refinement: '
+                        'geometry (rays against the mesh), horizon (every '
+                        'direction above the tangent plane: right for '
+                        'convex objects, and what lets a point cloud be '
+                        'refined) or auto (geometry when the scene has a '
+                        'mesh) (default: auto)')
     parser.add_argument('--device', default='cpu',
                         help='cpu, cuda, cuda:N or auto (cuda when there is '
                         'one) (default: cpu)')
@@ -184,7 +194,9 @@ def run(args):
         given = [option for option, value in (
             ('--out', args.out), ('--steps', args.steps),
             ('--l-max', args.l_max), ('--metallic', args.metallic),
-            ('--refine', args.refine or None)) if value is not None]
+            ('--solver', args.solver), ('--refine', args.refine),
+            ('--visibility', None if args.visibility == VISIBILITY[0]
+             else args.visibility)) if value is not None]
         if given:
             one = len(given) == 1
             raise UsageError(
@@ -256,13 +268,9 @@ def recover(args) -> int:
     from tg_intrinsic.devices import resolve_device
     from tg_intrinsic.io.results import check_output_path, result_folder
     from tg_intrinsic.io.scene import GROUND_TRUTH_FILE, scene_files
-    from tg_intrinsic.transforms import FitSphericalHarmonics
 
     device = resolve_device(args.device, '--device')
     dtype = getattr(torch, args.dtype)
-    l_max = args.l_max if args.l_max is not None else (
-        SPLIT_SUM_L_MAX if args.specular_model == 'split_sum'
-        else default_of(FitSphericalHarmonics.__init__, 'l_max'))
     scene = args.scene
     truth_path = os.path.join(scene, GROUND_TRUTH_FILE)
     out = args.out if args.out is not None else os.path.join(
@@ -281,15 +289,14 @@ def recover(args) -> int:
     with result_folder(out, 'svbrdf', args.overwrite,
                        inputs=[scene, truth_path] + scene_files(scene)
                        ) as staging:
-        report = _recover(args, data, truth, device, l_max, seconds, start,
+        report = _recover(args, data, truth, device, seconds, start,
                           staging)
     if not args.quiet:
         _print_summary(out, report)
     return 0
 
 
-def _recover(args, data, truth, device, l_max, seconds, start,
-             out) -> dict:
+def _recover(args, data, truth, device, seconds, start, out) -> dict:
     """Recovers the maps of the scene read into ``data`` and writes every
     output into ``out`` (the staging folder); returns the report."""
     import numpy as np
@@ -297,41 +304,26 @@ def _recover(args, data, truth, device, l_max, seconds, start,
     import tg_intrinsic
     from tg_intrinsic.io import scene_summary
     from tg_intrinsic.nn import FrequencySVBRDF
-    from tg_intrinsic.nn.frequency_svbrdf import DEFAULT_STEPS
-    from tg_intrinsic.transforms import (FitSphericalHarmonics,
-                                         ProjectViews, SpectralUncertainty)
     from tg_intrinsic.utils import atomic_write_json
 
     scene = args.scene
     if not args.quiet:
         print(f"read {scene}: {scene_summary(data)}", file=sys.stderr,
               flush=True)
-    data = data.to(device)
-    with stage('projecting the points into the views', args.quiet,
-                seconds, 'project'):
-        data = ProjectViews()(data)
-    with stage(f'fitting spherical harmonics (l_max = {l_max})',
-                args.quiet, seconds, 'fit_spherical_harmonics'):
-        data = FitSphericalHarmonics(l_max=l_max)(data)
-    with stage('spectral uncertainty', args.quiet, seconds,
-                'spectral_uncertainty'):
-        data = SpectralUncertainty(store_likelihood=False)(data)
     model = FrequencySVBRDF(data.num_nodes,
                             specular_model=args.specular_model).to(device)
-    steps = DEFAULT_STEPS[args.solver] if args.steps is None else args.steps
-    with stage(f'fitting ({args.solver}, {steps} steps)', args.quiet,
-               seconds, 'fit'):
-        result = model.fit(data, steps=steps, tv_weight=args.tv_weight,
-                           metallic=args.metallic, solver=args.solver,
-                           progress=not args.quiet)
-    fitted = result
-    if args.refine:
-        with stage(f'refining against the full integral ({args.refine} '
-                   f'steps)', args.quiet, seconds, 'refine'):
-            result = model.refine(data, steps=args.refine,
-                                  tv_weight=args.tv_weight,
-                                  metallic=args.metallic,
-                                  progress=not args.quiet)
+    refine = {None: 'auto', 0: False}.get(args.refine, True)
+    result, data = model.recover(
+        data.to(device), refine=refine, visibility=args.visibility,
+        solver=args.solver, steps=args.steps,
+        **({} if refine is not True else {'refine_steps': args.refine}),
+        l_max=args.l_max, tv_weight=args.tv_weight, metallic=args.metallic,
+        log=None if args.quiet else lambda line: print(
+            line, file=sys.stderr, flush=True),
+        progress=not args.quiet)
+    pipeline = result.pipeline
+    fit, refine = pipeline['fit'], pipeline['refine']
+    seconds.update(pipeline['seconds'])
     with stage('writing', args.quiet, seconds, 'write'):
         maps = result.maps()
         files = _write_outputs(out, data, result, maps,
@@ -352,16 +344,21 @@ def _recover(args, data, truth, device, l_max, seconds, start,
             'min': int(seen.min()), 'median': float(seen.median()),
             'mean': round(float(seen.mean()), 3), 'max': int(seen.max()),
             'unseen_points': int((seen == 0).sum())},
-        'options': {'solver': args.solver, 'steps': steps, 'l_max': l_max,
+        'pipeline': {
+            'steps': list(pipeline['seconds']),
+            'fit': pipeline['fit'], 'refine': pipeline['refine'],
+            'not_refined_because': pipeline['not_refined_because']},
+        # what ran, the defaults resolved
+        'options': {'solver': fit and fit['solver'],
+                    'steps': fit and fit['steps'],
+                    'l_max': pipeline['l_max'],
                     'specular_model': args.specular_model,
                     'metallic': args.metallic, 'tv_weight': args.tv_weight,
-                    'refine': args.refine,
+                    'refine': refine['steps'] if refine else 0,
+                    'visibility': refine and refine['visibility'],
                     'device': str(device), 'dtype': args.dtype},
         'seconds': seconds,
-        'initial_loss': fitted.loss[0],
-        'final_loss': fitted.loss[-1],
-        'refine_loss': [result.loss[0], result.loss[-1]]
-        if args.refine else None,
+        'loss': pipeline['loss'],
         'mean_entropy': float(np.mean(maps['entropy'])),
         'ground_truth': None if truth is None else _errors(maps, truth),
         'files': sorted(os.path.basename(f) for f in files) + ['report.json'],
@@ -529,31 +526,37 @@ def _srgb(linear):
 
 def _print_summary(out: str, report: dict):
     seen = report['observations_per_point']
+    pipeline, seconds = report['pipeline'], report['seconds']
     lines = [
         f"{report['points']} points, {report['views']} views: "
         f"{seen['mean']:.1f} observations per point on average"
         + (f", {seen['unseen_points']} points unseen"
            if seen['unseen_points'] else ''),
-        f"fit: {report['options']['steps']} steps in "
-        f"{report['seconds']['fit']:.1f} s, loss {report['initial_loss']:.4g}"
-        f" -> {report['final_loss']:.4g}; mean entropy "
-        f"{report['mean_entropy']:.3f}",
-    ]
-    if report['refine_loss'] is not None:
-        lines.append(
-            f"refinement against the full integral: "
-            f"{report['options']['refine']} steps in "
-            f"{report['seconds']['refine']:.1f} s, loss "
-            f"{report['refine_loss'][0]:.4g} -> "
-            f"{report['refine_loss'][1]:.4g}")
+        f"mean entropy {report['mean_entropy']:.3f}"]
+    if pipeline['fit'] is not None:
+        fit = pipeline['fit']
+        lines.append(f"spherical-harmonic fit: {fit['solver']}, "
+                     f"{fit['steps']} steps in {seconds['fit']:.1f} s")
+    if pipeline['refine'] is not None:
+        refine = pipeline['refine']
+        lines.append(f"refinement against the full integral: "
+                     f"{refine['steps']} steps in {seconds['refine']:.1f} s "
+                     f"({refine['visibility']} visibility)")
+    else:
+        lines.append(f"not refined: {pipeline['not_refined_because']}")
+    for name, (first, last) in report['loss'].items():
+        lines.append(f"{name} loss {first:.4g} -> {last:.4g}")
     truth = report['ground_truth']
     if truth is not None:
         rho = truth['entropy_roughness_error_spearman']
         lines.append(
             f"against the ground truth: roughness MAE "
             f"{truth['roughness_mae']:.3f}, base colour RMSE "
-            f"{truth['base_color_rmse']:.3f}, Spearman(entropy, roughness "
-            f"error) {'n/a' if rho is None else f'{rho:+.2f}'}")
+            f"{truth['base_color_rmse']:.3f}"
+            + (f", metallic MAE {truth['metallic_mae']:.3f}"
+               if 'metallic_mae' in truth else '')
+            + f", Spearman(entropy, roughness error) "
+            f"{'n/a' if rho is None else f'{rho:+.2f}'}")
     lines.append(f"wrote {out}: maps.npz, {', '.join(MAP_NAMES)} (.ply and "
-                 f".png), report.json ({report['seconds']['total']:.1f} s)")
+                 f".png), report.json ({seconds['total']:.1f} s)")
     print('\n'.join(lines))

@@ -41,6 +41,9 @@ class SVBRDFResult:
             every point when they are some of the texels (see
             :class:`~tg_intrinsic.transforms.TextureTexels`); :obj:`None`
             when they are all :math:`HW` texels, row by row.
+        pipeline (dict): What :meth:`~tg_intrinsic.nn.FrequencySVBRDF.recover`
+            ran: its steps, their seconds, the fit and refinement options,
+            and why the refinement did not run (or :obj:`None`).
     """
     base_color: Tensor
     metallic: Tensor
@@ -50,6 +53,7 @@ class SVBRDFResult:
     seconds: float = 0.0
     texture_shape: Optional[Tuple[int, int]] = None
     texel_index: Optional[Tensor] = None
+    pipeline: Optional[dict] = None
 
     def maps(self) -> dict:
         """The maps as numpy arrays; texel maps as :math:`(H, W[, 3])`

@@ -29,6 +29,9 @@ extras_require = {
         'h5py>=3.8',
         # SphereDigits' 8x8 digits (bundled in the wheel, no download)
         'scikit-learn>=1.2',
+        # svbrdf --texture: a UV atlas, and a glTF reader that is not ours
+        'xatlas>=0.0.9',
+        'pygltflib>=1.16',
     ],
     # log_map(method='vector_heat'): geometry-central's vector heat method.
     'heat': ['potpourri3d>=1.0'],
@@ -45,6 +48,8 @@ extras_require = {
     'mitsuba': ['mitsuba>=3.5'],
     # SphereDigits: scikit-learn's bundled 8x8 digits.
     'digits': ['scikit-learn>=1.2'],
+    # UV atlases for meshes without UVs (svbrdf --texture, uv_atlas).
+    'textures': ['xatlas>=0.0.9'],
 }
 
 setup(

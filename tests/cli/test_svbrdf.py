@@ -444,3 +444,44 @@ def test_a_point_cloud_is_refined_only_when_told_it_is_convex(
     assert report['pipeline']['refine'] == {'steps': 2,
                                             'visibility': 'horizon'}
     assert report['options']['visibility'] == 'horizon'
+
+
+def test_textures_and_a_gltf_binary(scene, point_scene, tmp_path, capsys):
+    import pygltflib
+    out = tmp_path / 'out'
+    assert run(['svbrdf', str(scene), '--out', str(out), '--texture', '64',
+                '--refine', '0', '--steps', '2']) == 0
+    assert '64 x 64 textures on an atlas' in capsys.readouterr().out
+    for name in ('base_color', 'metallic', 'roughness', 'entropy'):
+        assert (out / f'{name}_texture.png').is_file()
+    gltf = pygltflib.GLTF2().load(str(out / 'svbrdf.glb'))
+    assert gltf.materials[0].pbrMetallicRoughness.metallicRoughnessTexture \
+        is not None
+    report = json.loads((out / 'report.json').read_text())
+    assert report['texture']['uv'] == 'xatlas'
+    assert report['texture']['size'] == 64
+    assert 'svbrdf.glb' in report['files']
+    # a point cloud has no surface to put textures on: said before the work
+    assert run(['svbrdf', str(point_scene), '--out', str(tmp_path / 'p'),
+                '--texture', '64']) == 2
+    one_line_error(capsys, '--texture needs a mesh')
+    assert not (tmp_path / 'p').exists()
+    assert run(['svbrdf', str(scene), '--out', str(tmp_path / 'q'),
+                '--texture', '4']) == 2
+    one_line_error(capsys, '--texture', 'must lie in [8, 8192]')
+
+
+def test_textures_without_uvs_or_xatlas_say_how(scene, tmp_path, capsys,
+                                               monkeypatch):
+    import builtins
+    real_import = builtins.__import__
+
+    def no_xatlas(name, *args, **kwargs):
+        if name == 'xatlas':
+            raise ImportError('No module named xatlas')
+        return real_import(name, *args, **kwargs)
+    monkeypatch.setattr(builtins, '__import__', no_xatlas)
+    assert run(['svbrdf', str(scene), '--out', str(tmp_path / 'out'),
+                '--texture', '64']) == 2
+    one_line_error(capsys, 'pip install xatlas', 'OBJ vt')
+    assert not (tmp_path / 'out').exists()

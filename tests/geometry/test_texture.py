@@ -169,3 +169,101 @@ def test_uv_sphere_matches_its_formula():
     assert uv_sphere(4, 8, dtype=torch.float32)[0].dtype == torch.float32
     with pytest.raises(ValueError, match="'rows' must be at least 2"):
         uv_sphere(1, 8)
+
+
+# ------------------------------------------------------------------ baking
+def grid_mesh(n=6):
+    """A flat (n x n)-vertex grid over [0, 1]^2 in the xy plane."""
+    x, y = torch.meshgrid(torch.linspace(0, 1, n, dtype=torch.float64),
+                          torch.linspace(0, 1, n, dtype=torch.float64),
+                          indexing='ij')
+    pos = torch.stack([x.reshape(-1), y.reshape(-1),
+                       torch.zeros(n * n, dtype=torch.float64)], 1)
+    i = torch.arange(n - 1)
+    a = (i[:, None] * n + i[None, :]).reshape(-1)
+    face = torch.cat([torch.stack([a, a + n, a + n + 1]),
+                      torch.stack([a, a + n + 1, a + 1])], 1)
+    return pos, face
+
+
+def test_bake_texture_interpolates_linear_maps_exactly():
+    """Barycentric interpolation reproduces a linear function at every
+    texel centre; texels outside the UVs take the nearest covered texel's
+    value (here: the clamped one)."""
+    from tg_intrinsic.geometry import bake_texture
+    pos, face = grid_mesh()
+    values = torch.stack([0.2 + 0.5 * pos[:, 0] - 0.1 * pos[:, 1],
+                          0.3 * pos[:, 1] + 0.1], 1)
+    # the grid mapped onto the lower-left quarter of the texture
+    face_uv = 0.5 * pos[:, :2][face]
+    texture, coverage = bake_texture(values, face, face_uv, (16, 16))
+    assert texture.shape == (16, 16, 2) and texture.dtype == torch.float64
+    centres = torch.from_numpy(texel_centres(16, 16)).view(16, 16, 2)
+    rows, cols = torch.meshgrid(torch.arange(16), torch.arange(16),
+                                indexing='ij')
+    inside = (centres[..., 0] < 0.5) & (centres[..., 1] < 0.5)
+    assert torch.equal(coverage, inside)
+    # the oracle: the linear function at the texel centre, clamped into
+    # the covered quarter (rows 8-15, columns 0-7) for the padding
+    r, c = rows.clamp(min=8), cols.clamp(max=7)
+    u, v = centres[r, c, 0] / 0.5, centres[r, c, 1] / 0.5
+    expected = torch.stack([0.2 + 0.5 * u - 0.1 * v, 0.3 * v + 0.1], -1)
+    torch.testing.assert_close(texture, expected, rtol=0, atol=1e-12)
+    grey, _ = bake_texture(values[:, 0].float(), face, face_uv, (16, 16))
+    assert grey.shape == (16, 16) and grey.dtype == torch.float32
+
+
+def test_bake_texture_bad_input():
+    from tg_intrinsic.geometry import bake_texture
+    pos, face = grid_mesh(3)
+    values = pos[:, 0]
+    face_uv = pos[:, :2][face]
+    with pytest.raises(ValueError, match=r"'face_uv' must have shape "
+                       r"\[3, 8, 2\]"):
+        bake_texture(values, face, face_uv[:, :4], (8, 8))
+    with pytest.raises(ValueError, match=r"'values' must be a tensor of "
+                       r"shape \[V\] or \[V, C\]"):
+        bake_texture(values.view(3, 3, 1), face, face_uv, (8, 8))
+    with pytest.raises(ValueError, match="no texel centre"):
+        bake_texture(values, face, torch.zeros_like(face_uv), (8, 8))
+    with pytest.raises(ValueError, match=r"'face' must have shape \[3, F\]"):
+        bake_texture(values, face.t(), face_uv, (8, 8))
+
+
+def test_uv_atlas_charts_cover_without_overlap():
+    """xatlas's charts: every corner in [0, 1], no two triangles on one
+    texel (the covered area equals the sum of the UV triangles' areas),
+    and each chart a faithful map (UV area proportional to surface area
+    to within xatlas's stretch)."""
+    from tg_intrinsic.geometry import face_areas, uv_atlas
+    import trimesh
+    sphere = trimesh.creation.icosphere(2)
+    pos = torch.tensor(sphere.vertices)
+    face = torch.tensor(sphere.faces).t().contiguous()
+    face_uv = uv_atlas(pos, face)
+    assert face_uv.shape == (3, face.size(1), 2)
+    assert face_uv.dtype == pos.dtype
+    assert float(face_uv.min()) >= 0 and float(face_uv.max()) <= 1
+    a, b, c = face_uv[0], face_uv[1], face_uv[2]
+    uv_area = 0.5 * ((b - a)[:, 0] * (c - a)[:, 1]
+                     - (b - a)[:, 1] * (c - a)[:, 0]).abs()
+    size = 1024
+    index, _, _ = rasterize_uv(face_uv, size, size)
+    assert abs(index.numel() / size ** 2 - float(uv_area.sum())) < 0.02
+    ratio = uv_area / face_areas(pos, face)
+    assert float(ratio.max() / ratio.min()) < 3
+
+
+def test_uv_atlas_without_xatlas_says_how_to_get_it(monkeypatch):
+    import builtins
+    from tg_intrinsic.geometry import uv_atlas
+    real_import = builtins.__import__
+
+    def no_xatlas(name, *args, **kwargs):
+        if name == 'xatlas':
+            raise ImportError('No module named xatlas')
+        return real_import(name, *args, **kwargs)
+    monkeypatch.setattr(builtins, '__import__', no_xatlas)
+    pos, face = grid_mesh(3)
+    with pytest.raises(ImportError, match='pip install xatlas'):
+        uv_atlas(pos, face)

@@ -31,6 +31,8 @@ HELP = 'recover SVBRDF maps and their uncertainty from HDR photographs'
 MAP_NAMES = ('base_color', 'metallic', 'roughness', 'entropy')
 SPECULAR_MODELS = ('eq5.11', 'split_sum')
 VISIBILITY = ('auto', 'geometry', 'horizon')
+# a 16k x 16k texture is 1 GB per map: larger is a typing mistake
+MAX_TEXTURE = 8192
 # the synthetic example: an icosphere of 642 vertices seen by 24 cameras
 EXAMPLE_SUBDIVISIONS = 3
 EXAMPLE_VIEWS = 24
@@ -62,6 +64,16 @@ def _unit_float(text: str) -> float:
     value = nonnegative_float(text)
     if value > 1:
         raise argparse.ArgumentTypeError(f"must lie in [0, 1], got {text!r}")
+    return value
+
+
+def _texture_size(text: str) -> int:
+    """argparse type of --texture: a side of 8 to 8192 texels."""
+    import argparse
+    value = positive_int(text)
+    if not 8 <= value <= MAX_TEXTURE:
+        raise argparse.ArgumentTypeError(
+            f"must lie in [8, {MAX_TEXTURE}] texels, got {text!r}")
     return value
 
 
@@ -153,6 +165,14 @@ def add_arguments(parser):
                         'convex objects, and what lets a point cloud be '
                         'refined) or auto (geometry when the scene has a '
                         'mesh) (default: auto)')
+    parser.add_argument('--texture', type=_texture_size, default=None,
+                        metavar='N',
+                        help='also write the maps as N x N textures on the '
+                        'mesh\'s UVs (an atlas is made with xatlas when it '
+                        'has none): base_color/metallic/roughness/'
+                        'entropy_texture.png and svbrdf.glb, a glTF 2.0 '
+                        'binary with the PBR material that Blender and glTF '
+                        'viewers open (the thesis: 512)')
     parser.add_argument('--device', default='cpu',
                         help='cpu, cuda, cuda:N or auto (cuda when there is '
                         'one) (default: cpu)')
@@ -195,6 +215,7 @@ def run(args):
             ('--out', args.out), ('--steps', args.steps),
             ('--l-max', args.l_max), ('--metallic', args.metallic),
             ('--solver', args.solver), ('--refine', args.refine),
+            ('--texture', args.texture),
             ('--visibility', None if args.visibility == VISIBILITY[0]
              else args.visibility)) if value is not None]
         if given:
@@ -284,6 +305,8 @@ def recover(args) -> int:
     truth = _read_ground_truth(truth_path, data.pos) \
         if os.path.lexists(truth_path) else None
     seconds['read'] = round(time.perf_counter() - start, 3)
+    if args.texture is not None:
+        _check_texture_inputs(data)
     # every file written goes to a staging folder, put in place only when
     # all are written; --out may not hold the scene (--out SCENE/images)
     with result_folder(out, 'svbrdf', args.overwrite,
@@ -329,6 +352,13 @@ def _recover(args, data, truth, device, seconds, start, out) -> dict:
         files = _write_outputs(out, data, result, maps,
                                os.path.basename(os.path.normpath(
                                    os.path.abspath(scene))))
+        texture = None
+        if args.texture is not None:
+            from tg_intrinsic.io.gltf import write_textured_model
+            texture = write_textured_model(
+                out, data.pos, data.face, maps, args.texture,
+                getattr(data, 'face_uv', None), data.normal)
+            files += texture.pop('files')
     seconds['total'] = round(time.perf_counter() - start, 3)
 
     seen = data.obs_mask.sum(1).cpu().double()
@@ -359,6 +389,7 @@ def _recover(args, data, truth, device, seconds, start, out) -> dict:
                     'device': str(device), 'dtype': args.dtype},
         'seconds': seconds,
         'loss': pipeline['loss'],
+        'texture': texture,
         'mean_entropy': float(np.mean(maps['entropy'])),
         'ground_truth': None if truth is None else _errors(maps, truth),
         'files': sorted(os.path.basename(f) for f in files) + ['report.json'],
@@ -366,6 +397,22 @@ def _recover(args, data, truth, device, seconds, start, out) -> dict:
     }
     atomic_write_json(os.path.join(out, 'report.json'), report)
     return report
+
+
+def _check_texture_inputs(data):
+    """--texture needs a mesh, and UVs or xatlas to make them: said
+    before any work."""
+    if getattr(data, 'face', None) is None:
+        raise UsageError("--texture needs a mesh to put the textures on; "
+                         "the scene's geometry is a point cloud")
+    if getattr(data, 'face_uv', None) is None:
+        try:
+            import xatlas  # noqa: F401
+        except ImportError:
+            raise UsageError("--texture on a mesh without UVs needs the "
+                             "xatlas package to make an atlas: pip install "
+                             "xatlas, or give the mesh UVs (OBJ vt, PLY s "
+                             "t)") from None
 
 
 def _read_ground_truth(path: str, pos) -> dict:
@@ -481,6 +528,7 @@ def _write_outputs(out: str, data, result, maps: dict, name: str) -> list:
     import numpy as np
     from tg_intrinsic.io import write_ply
     from tg_intrinsic.io.figures import draw_surface
+    from tg_intrinsic.io.gltf import srgb_encode
     from tg_intrinsic.nn.svbrdf_result import MAP_INFO
 
     pos = data.pos.detach().cpu().double().numpy()
@@ -494,7 +542,7 @@ def _write_outputs(out: str, data, result, maps: dict, name: str) -> list:
         value = np.asarray(maps[key], dtype=np.float64)
         info = MAP_INFO[key]
         if value.ndim == 2:  # the base colour is its own colour
-            colors = _srgb(value)
+            colors = srgb_encode(value)
         else:
             colormap = matplotlib.colormaps[info['cmap']]
             colors = colormap(np.clip(value, 0, 1))[:, :3]
@@ -513,15 +561,6 @@ def _write_outputs(out: str, data, result, maps: dict, name: str) -> list:
                 normal=normal, title=title, label=info['label'],
                 cmap=info['cmap'], vmin=0.0, vmax=1.0))
     return files
-
-
-def _srgb(linear):
-    """Linear RGB in [0, 1] as sRGB-encoded display colours (IEC 61966-2-1),
-    so a base colour looks on screen as it would rendered."""
-    import numpy as np
-    linear = np.clip(linear, 0, 1)
-    return np.where(linear <= 0.0031308, 12.92 * linear,
-                    1.055 * linear ** (1 / 2.4) - 0.055)
 
 
 def _print_summary(out: str, report: dict):
@@ -557,6 +596,11 @@ def _print_summary(out: str, report: dict):
                if 'metallic_mae' in truth else '')
             + f", Spearman(entropy, roughness error) "
             f"{'n/a' if rho is None else f'{rho:+.2f}'}")
+    texture = report['texture']
+    textures = '' if texture is None else (
+        f", {texture['size']} x {texture['size']} textures on "
+        f"{'the mesh' if texture['uv'] == 'mesh' else 'an atlas'}'s UVs "
+        f"(*_texture.png, svbrdf.glb)")
     lines.append(f"wrote {out}: maps.npz, {', '.join(MAP_NAMES)} (.ply and "
-                 f".png), report.json ({seconds['total']:.1f} s)")
+                 f".png){textures}, report.json ({seconds['total']:.1f} s)")
     print('\n'.join(lines))

@@ -1,6 +1,7 @@
 r"""Texture space of a UV-mapped triangle mesh: which texels the UV
 triangles cover (a numba rasteriser in UV space), the 4-neighbour grid of
-the covered texels, and a UV-mapped sphere to test them on.
+the covered texels, a UV-mapped sphere to test them on, UV atlases of
+meshes without UVs (xatlas) and per-vertex values baked into textures.
 
 Texture convention (OpenGL / OBJ ``vt``): :math:`(u, v) \in [0, 1]^2` with
 :math:`v` pointing up, stored as an image of :math:`H` rows and :math:`W`
@@ -19,10 +20,11 @@ import torch
 from numba import njit
 from torch import Tensor
 
-from .checks import (check_image_size, check_index,
-                     check_positive_int, check_unit_interval)
+from .checks import (check_faces, check_image_size, check_index,
+                     check_points, check_positive_int, check_unit_interval)
 
-__all__ = ['rasterize_uv', 'texture_grid_edges', 'uv_sphere']
+__all__ = ['rasterize_uv', 'texture_grid_edges', 'uv_sphere', 'uv_atlas',
+           'bake_texture']
 
 # A texel centre on a triangle's edge belongs to it (up to this much of
 # the barycentric range), so that the two triangles of a shared edge leave
@@ -236,3 +238,100 @@ def uv_sphere(rows: int = 16, cols: int = 32,
             torch.stack([first_south + c, index[-1, 1:], index[-1, :-1]])]
     face = torch.cat(quads + caps, 1)
     return pos.to(dtype), face.contiguous(), uv.to(dtype)
+
+
+def uv_atlas(pos: Tensor, face: Tensor) -> Tensor:
+    r"""A UV atlas of a triangle mesh: charts cut and packed into
+    :math:`[0, 1]^2` without overlap by xatlas (the library Blender's and
+    many engines' exporters use; ``pip install xatlas``, the
+    ``[textures]`` extra), as UVs per triangle corner, the layout
+    :func:`rasterize_uv` and :func:`bake_texture` take. Runs on the CPU;
+    the result is on ``pos``'s device.
+
+    Args:
+        pos (torch.Tensor): Vertices :math:`(V, 3)`.
+        face (torch.Tensor): Triangles :math:`(3, F)`.
+
+    Returns:
+        ``face_uv`` :math:`(3, F, 2)` in ``pos``'s dtype: the UV of corner
+        :math:`k` of triangle :math:`f` at ``[k, f]``.
+    """
+    try:
+        import xatlas
+    except ImportError:
+        raise ImportError("a UV atlas needs the xatlas package: pip install "
+                          "xatlas (or tg_intrinsic[textures]), or give the "
+                          "mesh UVs ('vt' in an OBJ, s t in a PLY)") from None
+    pos = check_points(pos)
+    face = check_faces(face, pos.size(0), pos)
+    vertices = pos.detach().cpu().double().numpy().astype(np.float32)
+    triangles = face.t().cpu().numpy().astype(np.uint32)
+    mapping, indices, uvs = xatlas.parametrize(vertices, triangles)
+    if len(indices) != len(triangles) or not np.array_equal(
+            mapping[indices], triangles):  # one chart corner per corner
+        raise RuntimeError('xatlas returned triangles in another order than '
+                           'it was given; cannot map its UVs back')
+    face_uv = torch.from_numpy(np.clip(uvs[indices], 0, 1)).transpose(0, 1)
+    return face_uv.to(pos.device, pos.dtype).contiguous()
+
+
+def bake_texture(values: Tensor, face: Tensor, face_uv: Tensor,
+                 texture_shape) -> Tuple[Tensor, Tensor]:
+    r"""Per-vertex values as an :math:`(H, W)` texture: every texel whose
+    centre a UV triangle covers (:func:`rasterize_uv`) takes the values of
+    the triangle's corners interpolated by its barycentrics,
+
+    .. math::
+        T(r, c) = \sum_{k=0}^{2} \lambda_k\, x_{f_k},
+
+    and every other texel the value of the nearest covered texel (edge
+    padding, scipy's Euclidean distance transform), so that filtering and
+    mip-mapping across chart borders do not bleed the background in.
+    Rasterising and padding run on the CPU; the results are on
+    ``values``' device.
+
+    Args:
+        values (torch.Tensor): One row per vertex :math:`(V)` or
+            :math:`(V, C)`.
+        face (torch.Tensor): Triangles :math:`(3, F)`.
+        face_uv (torch.Tensor): UVs per corner :math:`(3, F, 2)`.
+        texture_shape (tuple): ``(H, W)``.
+
+    Returns:
+        ``(texture, coverage)``: :math:`(H, W)` or :math:`(H, W, C)` in
+        ``values``' dtype, and the boolean :math:`(H, W)` mask of the
+        texels a triangle covers.
+    """
+    from scipy.ndimage import distance_transform_edt
+    height, width = check_image_size(texture_shape, 'texture_shape')
+    if not isinstance(values, Tensor) or values.dim() not in (1, 2):
+        raise ValueError(f"'values' must be a tensor of shape [V] or [V, C]"
+                         f", got {getattr(values, 'shape', type(values))}")
+    face = check_faces(face, values.size(0), values)
+    if not isinstance(face_uv, Tensor) or face_uv.dim() != 3 or \
+            tuple(face_uv.shape[::2]) != (3, 2) or \
+            face_uv.size(1) != face.size(1):
+        raise ValueError(f"'face_uv' must have shape [3, {face.size(1)}, 2] "
+                         f"(a UV per corner of each triangle), got "
+                         f"{list(face_uv.shape)}")
+    texel, texel_face, bary = rasterize_uv(face_uv.detach().cpu().double(),
+                                           height, width)
+    if texel.numel() == 0:
+        raise ValueError(f"no texel centre of the {height} x {width} "
+                         f"texture lies in a UV triangle: the UVs have no "
+                         f"area, or the texture is too small")
+    flat = values.detach().cpu().double().reshape(values.size(0), -1)
+    corners = flat[face.cpu()[:, texel_face]]            # (3, N, C)
+    covered = (bary.t().unsqueeze(-1) * corners).sum(0)  # (N, C)
+    coverage = np.zeros(height * width, dtype=bool)
+    coverage[texel.numpy()] = True
+    texture = np.zeros((height * width, flat.size(1)))
+    texture[texel.numpy()] = covered.numpy()
+    coverage = coverage.reshape(height, width)
+    nearest = distance_transform_edt(~coverage, return_distances=False,
+                                     return_indices=True)
+    texture = texture.reshape(height, width, -1)[nearest[0], nearest[1]]
+    if values.dim() == 1:
+        texture = texture[..., 0]
+    return (torch.from_numpy(texture).to(values.device, values.dtype),
+            torch.from_numpy(coverage).to(values.device))

@@ -2,7 +2,8 @@
 point clouds with per-vertex properties, segmentation label files, and
 figures of values drawn on surfaces."""
 from .hdr import read_hdr, write_hdr, read_exr, read_envmap, looks_clipped
-from .mesh import read_mesh, read_surface, read_off, read_signal, write_ply
+from .mesh import (read_face_uv, read_mesh, read_surface, read_off,
+                   read_signal, write_ply)
 from .points import read_points, read_table
 from .labels import (read_labels, read_soft_labels, meshcnn_edges,
                      label_kind, label_scores, scores_to_labels,
@@ -17,7 +18,7 @@ __all__ = [
     'read_envmap',
     'looks_clipped',
     'read_mesh',
-    'read_surface',
+    'read_surface', 'read_face_uv',
     'read_off',
     'read_signal',
     'write_ply',

@@ -124,6 +124,43 @@ def read_surface(path: str, weld: bool = True, return_inverse: bool = False
     return pos, face, properties
 
 
+def read_face_uv(path: str, pos: np.ndarray, face: np.ndarray
+                 ) -> Optional[np.ndarray]:
+    """The texture coordinates of a mesh file, per triangle corner
+    ``(3, F, 2)`` (the layout of :func:`~tg_intrinsic.geometry.rasterize_uv`),
+    for the vertices ``pos`` and triangles ``face (F, 3)`` that
+    :func:`read_surface` read from it; :obj:`None` when the file has none
+    (OFF and STL never do). OBJ ``vt`` (seams included: a vertex may have
+    a UV per triangle) and PLY ``s t`` / ``texture_u texture_v`` are read
+    by trimesh. UVs outside :math:`[0, 1]` (tiling) are an error."""
+    import trimesh
+    ext = osp.splitext(path)[1].lower()
+    if ext not in ('.obj', '.ply'):
+        return None
+    loaded = trimesh.load(path, process=False, **(
+        dict(skip_materials=False) if ext == '.obj' else {}))
+    if isinstance(loaded, trimesh.Scene):
+        loaded = loaded.to_geometry() if len(loaded.geometry) else None
+    uv = getattr(getattr(loaded, 'visual', None), 'uv', None)
+    if uv is None or len(uv) != len(loaded.vertices):
+        return None
+    corners = np.asarray(loaded.faces, dtype=np.int64)
+    # trimesh splits a vertex at every UV seam; its triangles must still be
+    # ours, corner by corner
+    if corners.shape != face.shape or not np.allclose(
+            np.asarray(loaded.vertices)[corners], pos[face], rtol=0,
+            atol=1e-9 * max(1.0, float(np.abs(pos).max()))):
+        raise ValueError(f"'{path}': its texture coordinates could not be "
+                         f"matched to its triangles; export the mesh again "
+                         f"with one UV per corner")
+    uv = np.asarray(uv, dtype=np.float64)[corners].transpose(1, 0, 2)
+    if not np.isfinite(uv).all() or uv.min() < 0 or uv.max() > 1:
+        raise ValueError(f"'{path}' has texture coordinates outside [0, 1] "
+                         f"(tiled or UDIM textures); rescale them into [0, 1]"
+                         f" or remove them to have an atlas made")
+    return np.ascontiguousarray(uv)
+
+
 def _weld(path: str, pos: np.ndarray, face: np.ndarray,
           properties: Dict[str, np.ndarray]):
     """Merges the vertices at the same position (warning how many);

@@ -35,7 +35,7 @@ from tg_intrinsic.utils import atomic_write, atomic_write_file
 
 from .hdr import (looks_clipped, read_envmap, read_exr, read_hdr, read_npy,
                   write_hdr)
-from .mesh import MESH_EXTENSIONS, read_surface, write_ply
+from .mesh import MESH_EXTENSIONS, read_face_uv, read_surface, write_ply
 
 __all__ = ['FORMAT', 'read_scene', 'write_scene', 'scene_summary',
            'scene_files']
@@ -43,7 +43,8 @@ __all__ = ['FORMAT', 'read_scene', 'write_scene', 'scene_summary',
 FORMAT = r"""SCENE/
   cameras.json       the cameras, and which file is each photograph (required)
   geometry.ply       the surface: a mesh, or a point cloud (with normals
-                     nx ny nz, else they are estimated); OBJ, OFF, PLY or STL
+                     nx ny nz, else they are estimated); OBJ, OFF, PLY or STL;
+                     a mesh's UVs (OBJ vt, PLY s t) carry the textures
   envmap.exr         the lighting: an equirectangular linear HDR image
                      [H, W, 3] (W = 2 H, row 0 looks up, +z); .hdr, .exr, .npy
   images/
@@ -116,9 +117,11 @@ def read_scene(folder, dtype: torch.dtype = torch.float32) -> Data:
     Returns:
         :class:`~torch_geometric.data.Data` with ``pos`` :math:`(N, 3)`,
         ``normal`` :math:`(N, 3)` (unit), ``face`` :math:`(3, F)` (meshes
-        only), ``images`` :math:`(V, H, W, 3)`, ``intrinsics``
-        :math:`(V, 3, 3)`, ``extrinsics`` :math:`(V, 3, 4)` (world to
-        camera) and ``envmap`` :math:`(H_e, W_e, 3)`.
+        only), ``face_uv`` :math:`(3, F, 2)` (meshes with texture
+        coordinates, :func:`~tg_intrinsic.io.read_face_uv`), ``images``
+        :math:`(V, H, W, 3)`, ``intrinsics`` :math:`(V, 3, 3)`,
+        ``extrinsics`` :math:`(V, 3, 4)` (world to camera) and ``envmap``
+        :math:`(H_e, W_e, 3)`.
 
     Raises:
         ValueError: Naming the file and the problem: a missing folder or
@@ -137,7 +140,7 @@ def read_scene(folder, dtype: torch.dtype = torch.float32) -> Data:
                          f"got {dtype}")
     folder = os.fspath(folder)
     spec, files, geometry, envmap_file = _locate(folder)
-    pos, face, normal = _read_geometry(folder, geometry)
+    pos, face, normal, face_uv = _read_geometry(folder, geometry)
     envmap = _read_envmap(folder, envmap_file)
     images = _read_images(folder, files)
     intrinsics = torch.as_tensor(np.stack([c['K'] for c in spec['cameras']]),
@@ -150,6 +153,8 @@ def read_scene(folder, dtype: torch.dtype = torch.float32) -> Data:
                 envmap=envmap.to(dtype))
     if face is not None:
         data.face = face
+    if face_uv is not None:
+        data.face_uv = face_uv.to(dtype)
     return data
 
 
@@ -452,6 +457,9 @@ def _read_geometry(folder: str, name: str):
         pos, face, properties = read_surface(path)
     except FileNotFoundError as error:
         raise ValueError(str(error)) from None
+    face_uv = None if face is None else read_face_uv(path, pos, face)
+    if face_uv is not None:
+        face_uv = torch.from_numpy(face_uv)
     pos = torch.from_numpy(pos)
     if face is not None:
         face = torch.from_numpy(face).t().contiguous()
@@ -481,7 +489,7 @@ def _read_geometry(folder: str, name: str):
                              f"points, or normals as nx ny nz")
         normal = estimate_normals(pos, k=min(NORMAL_NEIGHBOURS,
                                              pos.size(0) - 1))
-    return pos, face, normal
+    return pos, face, normal, face_uv
 
 
 def _read_envmap(folder: str, name: str) -> torch.Tensor:

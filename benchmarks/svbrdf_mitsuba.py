@@ -71,6 +71,7 @@ def errors(data, base_color, roughness):
                    ).mean().sqrt()))
 
 
+DEFAULT = 'default (recover: full-integral refinement, metallic free)'
 # label: (l*, specular model, solver, metallic held, full-integral refinement)
 OURS = {'mixed (eq. 5.11, l* = 5), Adam': (5, 'eq5.11', 'adam', None, False),
         'mixed (eq. 5.11, l* = 5), LM': (5, 'eq5.11', 'lm', None, False),
@@ -80,7 +81,9 @@ OURS = {'mixed (eq. 5.11, l* = 5), Adam': (5, 'eq5.11', 'adam', None, False),
         'mixed LM, metallic 1': (5, 'eq5.11', 'lm', 1.0, False),
         # a short SH fit (5 iterations, one round) starts the refinement
         'mixed LM (5 iterations), metallic 1, + full-integral refinement': (
-            5, 'eq5.11', 'lm', 1.0, True)}
+            5, 'eq5.11', 'lm', 1.0, True),
+        # the command's default: FrequencySVBRDF.recover, metallic free
+        DEFAULT: (None, 'eq5.11', None, None, True)}
 #: "Mitsuba's best": this factor times the lowest error of its curve.
 BEST_TOLERANCE = 1.05
 #: The variant that initialises Mitsuba in "ours + prb".
@@ -94,6 +97,15 @@ def ours(data, images, steps, l_max, model, solver, metallic, refine):
     capture.images = torch.as_tensor(images)
     for key in ('obs_radiance', 'obs_dir', 'obs_mask'):
         del capture[key]
+    if solver is None:  # the default pipeline, from the photographs
+        start = time.perf_counter()
+        result, _ = FrequencySVBRDF(capture.num_nodes).recover(
+            capture, progress=False)
+        seconds = time.perf_counter() - start
+        stages = result.pipeline['seconds']
+        return seconds, seconds - stages['refine'], errors(
+            data, result.base_color.detach(), result.roughness.detach()), \
+            result
     start = time.perf_counter()
     capture = ProjectViews()(capture)
     capture = SpectralUncertainty()(
@@ -273,7 +285,13 @@ def main():
             row['ours'][label] = {'seconds': seconds,
                                   'preparation_seconds': prepared,
                                   'roughness_mae': rough,
-                                  'base_color_rmse': base}
+                                  'base_color_rmse': base,
+                                  'metallic_mae': float(
+                                      (result.metallic.detach()
+                                       - data.metallic).abs().mean())}
+            if result.pipeline is not None:
+                row['ours'][label]['stage_seconds'] = \
+                    result.pipeline['seconds']
             print(f'{name}: {data.num_nodes} vertices, {args.views} views '
                   f'of {size[0]}x{size[1]}; ours, {label}: {seconds:.1f} s, '
                   f'roughness MAE {rough:.3f}, base colour RMSE {base:.3f}',

@@ -34,16 +34,19 @@ deterministic). :math:`E` is a quadrature over every pixel of the map.
 import math
 from typing import Optional, Tuple
 
+import numpy as np
 import torch
+from numba import njit, prange
 from torch import Tensor
 
-from ..checks import (check_points, check_positive_int, check_seed,
-                      check_tensor)
+from ..checks import (check_choice, check_points, check_positive_int,
+                      check_seed, check_tensor)
 from ..pointcloud.frames import tangent_frames
 from .brdf import model_alpha
 from .cameras import look_at_cameras
-from .envmap import (check_envmap, direction_to_equirect, equirect_directions,
-                     equirect_lookup, equirect_solid_angles)
+from .envmap import (bilinear_rgb, check_envmap, direction_to_equirect,
+                     env_coords, equirect_directions, equirect_lookup,
+                     equirect_solid_angles)
 from .raster import point_visibility
 from .sh import smith_g1
 
@@ -203,7 +206,8 @@ def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
                       envmap: Tensor, roughness: Tensor,
                       visibility: Optional[Tensor] = None,
                       light_samples: int = 64, brdf_samples: int = 32,
-                      seed: int = 0, chunk: int = 512):
+                      seed: int = 0, chunk: int = 512,
+                      backend: str = 'auto'):
     r"""The shadowed irradiance :math:`E` and the specular integrals
     :math:`A, C` of the module docstring at every roughness of a grid.
 
@@ -227,8 +231,13 @@ def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
         brdf_samples (int, optional): Visible-normal samples per pair and
             roughness. (default: :obj:`32`)
         seed (int, optional): Seed of the sample shifts. (default: :obj:`0`)
-        chunk (int, optional): Pairs evaluated at once (memory).
-            (default: :obj:`512`)
+        chunk (int, optional): Pairs evaluated at once by the torch
+            backend (memory). (default: :obj:`512`)
+        backend (str, optional): :obj:`'numba'` (compiled, on the CPU: the
+            inputs are moved there and the tables back), :obj:`'torch'`
+            (on the inputs' device) or :obj:`'auto'` (numba for CPU
+            tensors, torch otherwise). Both take the same samples and
+            agree to rounding. (default: :obj:`'auto'`)
 
     Returns:
         ``(irradiance, tables)``: :math:`E` :math:`(N, 3)` and
@@ -252,7 +261,9 @@ def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
     brdf_samples = check_positive_int(brdf_samples, 'brdf_samples')
     chunk = check_positive_int(chunk, 'chunk')
     seed = check_seed(seed)
+    backend = check_choice(backend, 'backend', ('auto', 'numba', 'torch'))
     dtype, device = normal.dtype, normal.device
+    grid_rows = 0
     if visibility is not None:
         if visibility.dim() != 2 or visibility.size(0) != num:
             raise ValueError(f"'visibility' must be (N, cells) with N = {num},"
@@ -289,11 +300,27 @@ def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
         *environment.coordinates(light_dir)).unsqueeze(-1)
     light_local = torch.einsum('nij,nsj->nsi', frames, light_dir)
 
+    point, view = mask.nonzero(as_tuple=True)
+    uniforms = _uniforms(point.numel(), brdf_samples, 2, seed, 2, dtype,
+                         device)
+    if backend == 'numba' or (backend == 'auto' and device.type == 'cpu'):
+        # one compiled pass, nothing per sample stored
+        def numpy(t):
+            return t.detach().cpu().to(torch.float64).contiguous().numpy()
+        tables = np.zeros((num, views, roughness.numel(), 2, 3))
+        no_grid = np.zeros((0, 0))
+        _tables_kernel(
+            numpy(frames), numpy(view_dirs), point.cpu().numpy(),
+            view.cpu().numpy(),
+            numpy(alpha.flatten()), numpy(uniforms), numpy(light_local),
+            numpy(light), numpy(light_density), numpy(envmap),
+            numpy(environment.pixel_density), no_grid if visibility is None
+            else numpy(visibility), grid_rows if visibility is not None
+            else 0, tables)
+        return irradiance, torch.from_numpy(tables).to(device, dtype)
     tables = torch.zeros(num, views, roughness.numel(), 2, 3, dtype=dtype,
                          device=device)
-    point, view = mask.nonzero(as_tuple=True)
-    brdf_u1, brdf_u2 = _uniforms(point.numel(), brdf_samples, 2, seed, 2,
-                                 dtype, device).unbind(-1)
+    brdf_u1, brdf_u2 = uniforms.unbind(-1)
     for start in range(0, point.numel(), chunk):
         p, v = point[start:start + chunk], view[start:start + chunk]
         out = torch.einsum('cij,cj->ci', frames[p], view_dirs[p, v].to(dtype))
@@ -361,3 +388,120 @@ def _irradiance(normal: Tensor, environment: _Environment, visible
             points, row.expand(n.size(0), -1), col.expand(n.size(0), -1))
         out.append(cosine @ light)
     return torch.cat(out)
+
+
+@njit(cache=True, inline='always')
+def _smith_g1(c, alpha):  # pragma: no cover (numba)
+    """:func:`~tg_intrinsic.geometry.appearance.sh.smith_g1` of one
+    cosine."""
+    c = min(max(c, 0.0), 1.0)
+    if c <= 0:
+        return 0.0
+    root = math.sqrt(alpha * alpha + (1 - alpha * alpha) * c * c)
+    return 2 * c / max(c + root, 1e-30)
+
+
+@njit(cache=True, inline='always')
+def _accumulate(table, out_x, out_y, out_z, cos_o, g1_out, alpha,
+                in_z, half_x, half_y, half_z, radiance_r, radiance_g,
+                radiance_b, env_density, brdf_samples,
+                light_samples):  # pragma: no cover (numba)
+    """One sample of either strategy into ``table`` (2, 3), weighted by
+    the balance heuristic, as ``accumulate`` in :func:`reflection_tables`."""
+    if in_z <= 0:
+        return
+    cos_h = max(half_z, 0.0)
+    a2 = alpha * alpha
+    ggx = a2 / (math.pi * ((cos_h * cos_h) * (a2 - 1) + 1) ** 2)
+    brdf_density = g1_out * ggx / (4 * cos_o)
+    integrand = brdf_density * _smith_g1(in_z, alpha)
+    weight = integrand / max(brdf_samples * brdf_density
+                             + light_samples * env_density, 1e-300)
+    schlick = (1 - min(max(out_x * half_x + out_y * half_y
+                           + out_z * half_z, 0.0), 1.0)) ** 5
+    a, c = weight * (1 - schlick), weight * schlick
+    table[0, 0] += a * radiance_r
+    table[0, 1] += a * radiance_g
+    table[0, 2] += a * radiance_b
+    table[1, 0] += c * radiance_r
+    table[1, 1] += c * radiance_g
+    table[1, 2] += c * radiance_b
+
+
+@njit(cache=True, parallel=True)
+def _tables_kernel(frames, view_dirs, pair_point, pair_view, alphas,
+                   uniforms, light_local, light, light_density, env,
+                   pixel_density, visibility, grid_rows,
+                   tables):  # pragma: no cover (numba)
+    """The torch loop of :func:`reflection_tables` on the CPU, the same
+    samples and arithmetic, one pair per iteration."""
+    height, width = env.shape[0], env.shape[1]
+    brdf_samples, light_samples = uniforms.shape[1], light_local.shape[1]
+    for c in prange(pair_point.size):
+        p, v = pair_point[c], pair_view[c]
+        frame = frames[p]
+        wx, wy, wz = view_dirs[p, v, 0], view_dirs[p, v, 1], view_dirs[p, v, 2]
+        ox = frame[0, 0] * wx + frame[0, 1] * wy + frame[0, 2] * wz
+        oy = frame[1, 0] * wx + frame[1, 1] * wy + frame[1, 2] * wz
+        oz = frame[2, 0] * wx + frame[2, 1] * wy + frame[2, 2] * wz
+        norm = max(math.sqrt(ox * ox + oy * oy + oz * oz), 1e-12)
+        ox, oy, oz = ox / norm, oy / norm, oz / norm
+        cos_o = max(oz, 1e-6)
+        for g in range(alphas.size):
+            alpha = alphas[g]
+            table = tables[p, v, g]
+            g1_out = _smith_g1(cos_o, alpha)
+            # the stretched view of the visible-normal sampling (Heitz)
+            sx, sy, sz = alpha * ox, alpha * oy, oz
+            norm = max(math.sqrt(sx * sx + sy * sy + sz * sz), 1e-12)
+            sx, sy, sz = sx / norm, sy / norm, sz / norm
+            length = math.sqrt(sx * sx + sy * sy)
+            if length < 1e-12:
+                t1x, t1y = 1.0, 0.0
+            else:
+                t1x, t1y = -sy / length, sx / length
+            t2x, t2y, t2z = -sz * t1y, sz * t1x, sx * t1y - sy * t1x
+            blend = 0.5 * (1 + sz)
+            for s in range(brdf_samples):
+                r = math.sqrt(uniforms[c, s, 0])
+                angle = 2 * math.pi * uniforms[c, s, 1]
+                p1, p2 = r * math.cos(angle), r * math.sin(angle)
+                p2 = (1 - blend) * math.sqrt(max(1 - p1 * p1, 0.0)) \
+                    + blend * p2
+                p3 = math.sqrt(max(1 - p1 * p1 - p2 * p2, 0.0))
+                hx = alpha * (p1 * t1x + p2 * t2x + p3 * sx)
+                hy = alpha * (p1 * t1y + p2 * t2y + p3 * sy)
+                hz = max(p2 * t2z + p3 * sz, 0.0)
+                norm = max(math.sqrt(hx * hx + hy * hy + hz * hz), 1e-12)
+                hx, hy, hz = hx / norm, hy / norm, hz / norm
+                d = 2 * (ox * hx + oy * hy + oz * hz)
+                ix, iy, iz = d * hx - ox, d * hy - oy, d * hz - oz
+                # to the world: the frame's rows are the local axes
+                x = frame[0, 0] * ix + frame[1, 0] * iy + frame[2, 0] * iz
+                y = frame[0, 1] * ix + frame[1, 1] * iy + frame[2, 1] * iz
+                z = frame[0, 2] * ix + frame[1, 2] * iy + frame[2, 2] * iz
+                row, col = env_coords(x, y, z, height, width)
+                radiance = bilinear_rgb(env, row, col)
+                seen = 1.0
+                if grid_rows > 0:
+                    cell_row = min(max(np.int64(row * (grid_rows / height)),
+                                       0), grid_rows - 1)
+                    cell_col = min(max(np.int64(
+                        col * (2 * grid_rows / width)), 0), 2 * grid_rows - 1)
+                    seen = visibility[p, cell_row * 2 * grid_rows + cell_col]
+                pixel = min(max(np.int64(row), 0), height - 1) * width \
+                    + min(max(np.int64(col), 0), width - 1)
+                _accumulate(table, ox, oy, oz, cos_o, g1_out, alpha, iz, hx,
+                            hy, hz, seen * radiance[0], seen * radiance[1],
+                            seen * radiance[2], pixel_density[pixel],
+                            brdf_samples, light_samples)
+            for s in range(light_samples):
+                ix, iy, iz = light_local[p, s, 0], light_local[p, s, 1], \
+                    light_local[p, s, 2]
+                hx, hy, hz = ix + ox, iy + oy, iz + oz
+                norm = max(math.sqrt(hx * hx + hy * hy + hz * hz), 1e-12)
+                _accumulate(table, ox, oy, oz, cos_o, g1_out, alpha, iz,
+                            hx / norm, hy / norm, hz / norm, light[p, s, 0],
+                            light[p, s, 1], light[p, s, 2],
+                            light_density[p, s], brdf_samples,
+                            light_samples)

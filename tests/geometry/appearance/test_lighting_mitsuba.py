@@ -21,8 +21,9 @@ except (ImportError, AttributeError) as error:  # no libLLVM
                 allow_module_level=True)
 import drjit as dr  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(
-    os.path.abspath(__file__))))
+# tests/geometry/appearance/ -> the repository
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(
+    os.path.abspath(__file__)))))
 _spec = importlib.util.spec_from_file_location(
     'mitsuba_scene', os.path.join(ROOT, 'benchmarks', 'oracles',
                                   'mitsuba_scene.py'))

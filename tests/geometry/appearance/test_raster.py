@@ -88,6 +88,65 @@ def test_point_visibility_two_layers():
                                torch.tensor([0.0, 0.0, 5.0], dtype=D64))
 
 
+def brute_force_visibility(points, V, F, K, E, height, width):
+    """Every point against every triangle: hidden iff the segment from the
+    camera centre to it crosses a triangle before it (Moller-Trumbore)."""
+    out = np.zeros((len(points), len(K)), dtype=bool)
+    for v in range(len(K)):
+        cam = (V @ E[v, :, :3].T + E[v, :, 3]).numpy()
+        pts = (points @ E[v, :, :3].T + E[v, :, 3]).numpy()
+        uv = pts @ K[v].numpy().T
+        inside = (pts[:, 2] > 1e-6) & (uv[:, 0] / uv[:, 2] >= 0) & (
+            uv[:, 0] / uv[:, 2] < width) & (uv[:, 1] / uv[:, 2] >= 0) & (
+            uv[:, 1] / uv[:, 2] < height)
+        hidden = np.zeros(len(pts), dtype=bool)
+        for a, b, c in F.t().numpy():
+            A, B, C = cam[a], cam[b], cam[c]
+            e1, e2 = B - A, C - A
+            p = np.cross(pts, e2)
+            det = p @ e1
+            with np.errstate(divide='ignore', invalid='ignore'):
+                u = (p * (-A)).sum(-1) / det
+                q = np.cross(-A, e1)
+                w = (q * pts).sum(-1) / det
+                t = (q @ e2) / det
+            hidden |= (u >= 0) & (w >= 0) & (u + w <= 1) & (t > 0) & (
+                t < 1 - 1e-9)
+        out[:, v] = inside & ~hidden
+    return out
+
+
+def test_many_cameras_cast_in_parallel_agree_with_brute_force():
+    """From 16 cameras on the cameras are cast in parallel; both paths
+    agree with brute force, and 'needed' casts only its pairs."""
+    import trimesh
+    from tg_intrinsic.geometry.appearance.cameras import look_at_cameras
+    sphere = trimesh.creation.icosphere(2)
+    V = torch.tensor(sphere.vertices, dtype=D64)
+    F = torch.tensor(sphere.faces).t().contiguous()
+    g = torch.Generator().manual_seed(0)
+    points = torch.cat([V * 1.001, V[:40] * 0.5,
+                        torch.randn(30, 3, generator=g, dtype=D64) * 1.5])
+    directions = torch.nn.functional.normalize(
+        torch.randn(20, 3, generator=g, dtype=D64), dim=1)
+    K, E = look_at_cameras(4 * directions, fov_degrees=50,
+                           image_size=(48, 48))
+    parallel = point_visibility(points, V, F, K, E, 48, 48)
+    one_by_one = torch.cat([point_visibility(points, V, F, K[v:v + 1],
+                                             E[v:v + 1], 48, 48)
+                            for v in range(20)], 1)
+    assert torch.equal(parallel, one_by_one)
+    assert np.array_equal(parallel.numpy(), brute_force_visibility(
+        points, V, F, K, E, 48, 48))
+    assert 0.2 < parallel.double().mean() < 0.8
+    needed = torch.rand(len(points), 20, generator=g) > 0.5
+    some = point_visibility(points, V, F, K, E, 48, 48, needed=needed)
+    assert torch.equal(some, parallel & needed)
+    with pytest.raises(ValueError, match=r"'needed' must be a bool tensor "
+                       r"of shape \[\d+, 20\]"):
+        point_visibility(points, V, F, K, E, 48, 48, needed=needed[:5])
+
+
 def test_bad_input():
     V, F = small_mesh()
     K, E = camera([0.3, -2.2, 1.0], size=(24, 24))

@@ -63,8 +63,9 @@ def direction_visibility(points: Tensor, normal: Tensor, vertices: Tensor,
     triangle. Exact ray casting
     (:func:`~tg_intrinsic.geometry.appearance.raster.point_visibility`)
     from one distant camera per direction, so the cost is one rasterisation
-    of the mesh per cell. Directions below a point's horizon are not
-    excluded here (the integrands are zero there). The rays are cast on
+    of the mesh per cell, the cells in parallel. A cell that lies wholly
+    below a point's horizon is not cast (False: the integrands are zero
+    there); one that crosses the horizon is. The rays are cast on
     the CPU, in float64 (exact hits decide visibility); the result is on
     the device of :obj:`points`.
 
@@ -96,10 +97,15 @@ def direction_visibility(points: Tensor, normal: Tensor, vertices: Tensor,
     intrinsics, extrinsics = look_at_cameras(
         centre + distance * directions, centre.tolist(),
         2 * math.degrees(math.atan(0.6 * size / distance)), (pixels, pixels))
+    # a direction whose whole cell lies below a point's horizon would
+    # carry zero light: not cast (a cell's half diagonal is at most
+    # pi / rows wide)
+    needed = normal.detach().double().cpu() @ directions.T \
+        >= -math.sin(min(math.pi / rows, math.pi / 2))
     # the lifted point is off its triangles: any hit in front occludes
     return point_visibility(start, pos, faces.detach().cpu(), intrinsics,
-                            extrinsics, pixels, pixels,
-                            rel_tol=1e-12).to(points.device)
+                            extrinsics, pixels, pixels, rel_tol=1e-12,
+                            needed=needed).to(points.device)
 
 
 class _Environment:
@@ -402,39 +408,37 @@ def _smith_g1(c, alpha):  # pragma: no cover (numba)
 
 
 @njit(cache=True, inline='always')
-def _accumulate(table, out_x, out_y, out_z, cos_o, g1_out, alpha,
-                in_z, half_x, half_y, half_z, radiance_r, radiance_g,
-                radiance_b, env_density, brdf_samples,
-                light_samples):  # pragma: no cover (numba)
-    """One sample of either strategy into ``table`` (2, 3), weighted by
-    the balance heuristic, as ``accumulate`` in :func:`reflection_tables`."""
+def _sample_weight(cos_o, g1_out, alpha, in_z, cos_h, env_density,
+                   brdf_samples, light_samples):  # pragma: no cover (numba)
+    """The balance-heuristic weight of one sample of either strategy, as
+    ``accumulate`` in :func:`reflection_tables` (0 below the horizon;
+    ``cos_h`` clamped at 0)."""
     if in_z <= 0:
-        return
-    cos_h = max(half_z, 0.0)
+        return 0.0
     a2 = alpha * alpha
-    ggx = a2 / (math.pi * ((cos_h * cos_h) * (a2 - 1) + 1) ** 2)
-    brdf_density = g1_out * ggx / (4 * cos_o)
+    d = (cos_h * cos_h) * (a2 - 1) + 1
+    brdf_density = g1_out * a2 / (math.pi * d * d) / (4 * cos_o)
     integrand = brdf_density * _smith_g1(in_z, alpha)
-    weight = integrand / max(brdf_samples * brdf_density
-                             + light_samples * env_density, 1e-300)
-    schlick = (1 - min(max(out_x * half_x + out_y * half_y
-                           + out_z * half_z, 0.0), 1.0)) ** 5
-    a, c = weight * (1 - schlick), weight * schlick
-    table[0, 0] += a * radiance_r
-    table[0, 1] += a * radiance_g
-    table[0, 2] += a * radiance_b
-    table[1, 0] += c * radiance_r
-    table[1, 1] += c * radiance_g
-    table[1, 2] += c * radiance_b
+    return integrand / max(brdf_samples * brdf_density
+                           + light_samples * env_density, 1e-300)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, inline='always')
+def _schlick(ox, oy, oz, hx, hy, hz):  # pragma: no cover (numba)
+    """Schlick's weight (1 - o . h)^5, the dot clamped to [0, 1]."""
+    t = 1 - min(max(ox * hx + oy * hy + oz * hz, 0.0), 1.0)
+    t2 = t * t
+    return t2 * t2 * t
+
+
+@njit(cache=True, parallel=True, fastmath=True)
 def _tables_kernel(frames, view_dirs, pair_point, pair_view, alphas,
                    uniforms, light_local, light, light_density, env,
                    pixel_density, visibility, grid_rows,
                    tables):  # pragma: no cover (numba)
     """The torch loop of :func:`reflection_tables` on the CPU, the same
-    samples and arithmetic, one pair per iteration."""
+    samples and arithmetic, one pair per iteration, the sums in
+    registers."""
     height, width = env.shape[0], env.shape[1]
     brdf_samples, light_samples = uniforms.shape[1], light_local.shape[1]
     for c in prange(pair_point.size):
@@ -447,10 +451,21 @@ def _tables_kernel(frames, view_dirs, pair_point, pair_view, alphas,
         norm = max(math.sqrt(ox * ox + oy * oy + oz * oz), 1e-12)
         ox, oy, oz = ox / norm, oy / norm, oz / norm
         cos_o = max(oz, 1e-6)
+        # the environment samples' geometry is the same at every roughness
+        light_cos_h = np.empty(light_samples)
+        light_schlick = np.empty(light_samples)
+        for s in range(light_samples):
+            hx = light_local[p, s, 0] + ox
+            hy = light_local[p, s, 1] + oy
+            hz = light_local[p, s, 2] + oz
+            norm = max(math.sqrt(hx * hx + hy * hy + hz * hz), 1e-12)
+            hx, hy, hz = hx / norm, hy / norm, hz / norm
+            light_cos_h[s] = max(hz, 0.0)
+            light_schlick[s] = _schlick(ox, oy, oz, hx, hy, hz)
         for g in range(alphas.size):
             alpha = alphas[g]
-            table = tables[p, v, g]
             g1_out = _smith_g1(cos_o, alpha)
+            a_r = a_g = a_b = c_r = c_g = c_b = 0.0
             # the stretched view of the visible-normal sampling (Heitz)
             sx, sy, sz = alpha * ox, alpha * oy, oz
             norm = max(math.sqrt(sx * sx + sy * sy + sz * sz), 1e-12)
@@ -476,12 +491,13 @@ def _tables_kernel(frames, view_dirs, pair_point, pair_view, alphas,
                 hx, hy, hz = hx / norm, hy / norm, hz / norm
                 d = 2 * (ox * hx + oy * hy + oz * hz)
                 ix, iy, iz = d * hx - ox, d * hy - oy, d * hz - oz
+                if iz <= 0:  # no contribution: skip the lookups
+                    continue
                 # to the world: the frame's rows are the local axes
                 x = frame[0, 0] * ix + frame[1, 0] * iy + frame[2, 0] * iz
                 y = frame[0, 1] * ix + frame[1, 1] * iy + frame[2, 1] * iz
                 z = frame[0, 2] * ix + frame[1, 2] * iy + frame[2, 2] * iz
                 row, col = env_coords(x, y, z, height, width)
-                radiance = bilinear_rgb(env, row, col)
                 seen = 1.0
                 if grid_rows > 0:
                     cell_row = min(max(np.int64(row * (grid_rows / height)),
@@ -489,19 +505,38 @@ def _tables_kernel(frames, view_dirs, pair_point, pair_view, alphas,
                     cell_col = min(max(np.int64(
                         col * (2 * grid_rows / width)), 0), 2 * grid_rows - 1)
                     seen = visibility[p, cell_row * 2 * grid_rows + cell_col]
+                    if seen == 0:
+                        continue
                 pixel = min(max(np.int64(row), 0), height - 1) * width \
                     + min(max(np.int64(col), 0), width - 1)
-                _accumulate(table, ox, oy, oz, cos_o, g1_out, alpha, iz, hx,
-                            hy, hz, seen * radiance[0], seen * radiance[1],
-                            seen * radiance[2], pixel_density[pixel],
-                            brdf_samples, light_samples)
+                weight = seen * _sample_weight(
+                    cos_o, g1_out, alpha, iz, hz, pixel_density[pixel],
+                    brdf_samples, light_samples)
+                schlick = _schlick(ox, oy, oz, hx, hy, hz)
+                red, green, blue = bilinear_rgb(env, row, col)
+                a, f = weight * (1 - schlick), weight * schlick
+                a_r += a * red
+                a_g += a * green
+                a_b += a * blue
+                c_r += f * red
+                c_g += f * green
+                c_b += f * blue
             for s in range(light_samples):
-                ix, iy, iz = light_local[p, s, 0], light_local[p, s, 1], \
-                    light_local[p, s, 2]
-                hx, hy, hz = ix + ox, iy + oy, iz + oz
-                norm = max(math.sqrt(hx * hx + hy * hy + hz * hz), 1e-12)
-                _accumulate(table, ox, oy, oz, cos_o, g1_out, alpha, iz,
-                            hx / norm, hy / norm, hz / norm, light[p, s, 0],
-                            light[p, s, 1], light[p, s, 2],
-                            light_density[p, s], brdf_samples,
-                            light_samples)
+                weight = _sample_weight(
+                    cos_o, g1_out, alpha, light_local[p, s, 2],
+                    light_cos_h[s], light_density[p, s], brdf_samples,
+                    light_samples)
+                a, f = weight * (1 - light_schlick[s]), \
+                    weight * light_schlick[s]
+                a_r += a * light[p, s, 0]
+                a_g += a * light[p, s, 1]
+                a_b += a * light[p, s, 2]
+                c_r += f * light[p, s, 0]
+                c_g += f * light[p, s, 1]
+                c_b += f * light[p, s, 2]
+            tables[p, v, g, 0, 0] = a_r
+            tables[p, v, g, 0, 1] = a_g
+            tables[p, v, g, 0, 2] = a_b
+            tables[p, v, g, 1, 0] = c_r
+            tables[p, v, g, 1, 1] = c_g
+            tables[p, v, g, 1, 2] = c_b

@@ -168,19 +168,20 @@ def _rasterize_kernel(cam, faces, K, Kinv, near, height,
     return face_id, bary, depth
 
 
-@njit(cache=True, parallel=True)
-def _visibility_kernel(cam, faces, K, near, height, width, points,
-                       rel_tol):  # pragma: no cover (numba)
-    """Ray casting from the camera centre to every point: occluded iff the
-    ray hits a triangle strictly before the point (coefficient sum > 1 +
-    tol; the point's own triangles give exactly 1). Candidate triangles
-    come from a screen grid (about F / 2 cells, finer than the pixels for
-    fine meshes) holding every triangle whose clipped extent overlaps the
-    cell."""
+@njit(cache=True)
+def _screen_grid(cam, faces, K, near, height,
+                 width):  # pragma: no cover (numba)
+    """Candidate triangles of the rays through the image: a screen grid
+    (about 2F cells, finer than the pixels for fine meshes) holding
+    every triangle whose clipped extent overlaps the cell, as CSR
+    ``(count, entries)`` with the grid's shape and scales."""
     ext = _face_extents(cam, faces, K, near, height, width)
     num_faces = faces.shape[0]
-    # about two triangles per cell when they cover the image evenly
-    side = max(1, np.int64(math.sqrt(num_faces / 2.0)))
+    # about half a triangle per cell when they cover the image evenly: with
+    # a cell of slack around each triangle's extent, coarser cells list
+    # several times more candidates per ray (measured: 2562 points seen
+    # from 512 directions, 0.79 s at two triangles per cell, 0.46 s here)
+    side = max(1, np.int64(2 * math.sqrt(num_faces / 2.0)))
     gh = min(side, 4 * height)
     gw = min(side, 4 * width)
     sy = gh / height
@@ -215,46 +216,101 @@ def _visibility_kernel(cam, faces, K, near, height, width, points,
             for gj in range(lo[f, 2], lo[f, 3] + 1):
                 entries[fill[gi * gw + gj]] = f
                 fill[gi * gw + gj] += 1
+    return count, entries, gh, gw, sy, sx
+
+
+@njit(cache=True, inline='always')
+def _sees(px, py, pz, cam, faces, K, near, height, width, count, entries,
+          gh, gw, sy, sx, limit):  # pragma: no cover (numba)
+    """Whether the camera sees the point (camera frame): in the image, in
+    front of the near plane, and no triangle of its grid cell hit by the
+    ray strictly before it (coefficient sum > ``limit``; the point's own
+    triangles give exactly 1)."""
+    if pz < near:
+        return False
+    u = (K[0, 0] * px + K[0, 1] * py) / pz + K[0, 2]
+    v = K[1, 1] * py / pz + K[1, 2]
+    if not (u >= 0.0 and u < width and v >= 0.0 and v < height):
+        return False
+    gi = min(np.int64(v * sy), gh - 1)
+    gj = min(np.int64(u * sx), gw - 1)
+    g = gi * gw + gj
+    for e in range(count[g], count[g + 1]):
+        f = entries[e]
+        a = cam[faces[f, 0]]
+        b = cam[faces[f, 1]]
+        c = cam[faces[f, 2]]
+        if min(a[2], b[2], c[2]) >= pz:
+            continue  # every hit on it lies at the point's depth or behind
+        det = _triple(a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2])
+        if det == 0.0:
+            continue
+        wa = _triple(px, py, pz, b[0], b[1], b[2], c[0], c[1], c[2]) / det
+        wb = _triple(px, py, pz, c[0], c[1], c[2], a[0], a[1], a[2]) / det
+        wc = _triple(px, py, pz, a[0], a[1], a[2], b[0], b[1], b[2]) / det
+        if wa < 0.0 or wb < 0.0 or wc < 0.0:
+            continue
+        total = wa + wb + wc
+        # hit at depth pz / total: in front of the point, behind the near
+        # plane
+        if total > limit and pz >= near * total:
+            return False
+    return True
+
+
+@njit(cache=True, parallel=True)
+def _visibility_kernel(cam, faces, K, near, height, width, points,
+                       rel_tol):  # pragma: no cover (numba)
+    """Ray casting from the camera centre to every point (in parallel over
+    the points), the candidates from :func:`_screen_grid`."""
+    count, entries, gh, gw, sy, sx = _screen_grid(cam, faces, K, near,
+                                                  height, width)
     num = points.shape[0]
     visible = np.zeros(num, dtype=np.bool_)
-    limit = 1.0 + rel_tol
     for k in prange(num):
-        px, py, pz = points[k, 0], points[k, 1], points[k, 2]
-        if pz < near:
-            continue
-        u = (K[0, 0] * px + K[0, 1] * py) / pz + K[0, 2]
-        v = K[1, 1] * py / pz + K[1, 2]
-        if not (u >= 0.0 and u < width and v >= 0.0 and v < height):
-            continue
-        gi = min(np.int64(v * sy), gh - 1)
-        gj = min(np.int64(u * sx), gw - 1)
-        g = gi * gw + gj
-        hidden = False
-        for e in range(count[g], count[g + 1]):
-            f = entries[e]
-            a = cam[faces[f, 0]]
-            b = cam[faces[f, 1]]
-            c = cam[faces[f, 2]]
-            det = _triple(a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1],
-                          c[2])
-            if det == 0.0:
-                continue
-            wa = _triple(px, py, pz, b[0], b[1], b[2], c[0], c[1], c[2]) \
-                / det
-            wb = _triple(px, py, pz, c[0], c[1], c[2], a[0], a[1], a[2]) \
-                / det
-            wc = _triple(px, py, pz, a[0], a[1], a[2], b[0], b[1], b[2]) \
-                / det
-            if wa < 0.0 or wb < 0.0 or wc < 0.0:
-                continue
-            total = wa + wb + wc
-            # hit at depth pz / total: in front of the point, behind the
-            # near plane
-            if total > limit and pz >= near * total:
-                hidden = True
-                break
-        visible[k] = not hidden
+        visible[k] = _sees(points[k, 0], points[k, 1], points[k, 2], cam,
+                           faces, K, near, height, width, count, entries, gh,
+                           gw, sy, sx, 1.0 + rel_tol)
     return visible
+
+
+@njit(cache=True, parallel=True)
+def _cameras_visibility_kernel(vertices, faces, K, E, near, height, width,
+                               points, needed,
+                               rel_tol):  # pragma: no cover (numba)
+    """:func:`_visibility_kernel` for many cameras at once, in parallel
+    over the cameras; only the (point, camera) pairs of ``needed`` are
+    cast (the others are False)."""
+    num_cameras, num = K.shape[0], points.shape[0]
+    visible = np.zeros((num, num_cameras), dtype=np.bool_)
+    for v in prange(num_cameras):
+        R, t = E[v, :, :3], E[v, :, 3]
+        cam = np.empty_like(vertices)
+        for i in range(vertices.shape[0]):
+            for row in range(3):
+                cam[i, row] = R[row, 0] * vertices[i, 0] \
+                    + R[row, 1] * vertices[i, 1] \
+                    + R[row, 2] * vertices[i, 2] + t[row]
+        count, entries, gh, gw, sy, sx = _screen_grid(cam, faces, K[v],
+                                                      near, height, width)
+        for k in range(num):
+            if not needed[k, v]:
+                continue
+            px = R[0, 0] * points[k, 0] + R[0, 1] * points[k, 1] \
+                + R[0, 2] * points[k, 2] + t[0]
+            py = R[1, 0] * points[k, 0] + R[1, 1] * points[k, 1] \
+                + R[1, 2] * points[k, 2] + t[1]
+            pz = R[2, 0] * points[k, 0] + R[2, 1] * points[k, 1] \
+                + R[2, 2] * points[k, 2] + t[2]
+            visible[k, v] = _sees(px, py, pz, cam, faces, K[v], near,
+                                  height, width, count, entries, gh, gw,
+                                  sy, sx, 1.0 + rel_tol)
+    return visible
+
+
+# from this many cameras on, they are cast in parallel rather than the
+# points of one camera after another
+_MANY_CAMERAS = 16
 
 
 def cameras_numpy(intrinsics, extrinsics, batched: bool = True):
@@ -334,7 +390,7 @@ def rasterize(vertices: Tensor, faces: Tensor, intrinsics: Tensor,
 def point_visibility(points: Tensor, vertices: Tensor, faces: Tensor,
                      intrinsics: Tensor, extrinsics: Tensor, height: int,
                      width: int, near: float = 1e-6,
-                     rel_tol: float = 1e-6) -> Tensor:
+                     rel_tol: float = 1e-6, needed: Tensor = None) -> Tensor:
     r"""Which points each camera sees: the point projects inside the image,
     lies in front of the near plane, and the segment from the camera centre
     to it crosses no triangle of the mesh before it (exact ray casting, not
@@ -355,6 +411,9 @@ def point_visibility(points: Tensor, vertices: Tensor, faces: Tensor,
         width (int): Image columns.
         near (float, optional): Near-plane depth. (default: :obj:`1e-6`)
         rel_tol (float, optional): :math:`\epsilon`. (default: :obj:`1e-6`)
+        needed (torch.Tensor, optional): Bool :math:`(N, V)`: only these
+            pairs are cast, the others are :obj:`False`. (default:
+            :obj:`None`, all)
 
     Returns:
         Bool :math:`(N, V)`; a camera that sees no point gives a column of
@@ -366,6 +425,20 @@ def point_visibility(points: Tensor, vertices: Tensor, faces: Tensor,
     height, width = image_height_width(height, width)
     near = check_positive_float(near, 'near')
     rel_tol = check_positive_float(rel_tol, 'rel_tol')
+    if needed is not None:
+        needed = torch.as_tensor(needed)
+        if needed.shape != (P.shape[0], K.shape[0]) or \
+                needed.dtype != torch.bool:
+            raise ValueError(f"'needed' must be a bool tensor of shape "
+                             f"[{P.shape[0]}, {K.shape[0]}] (points, "
+                             f"cameras), got {needed.dtype} "
+                             f"{list(needed.shape)}")
+    if needed is not None or K.shape[0] >= _MANY_CAMERAS:
+        # in parallel over the cameras
+        return torch.from_numpy(_cameras_visibility_kernel(
+            V, F, K, E, near, height, width, P, np.ones(
+                (P.shape[0], K.shape[0]), dtype=np.bool_)
+            if needed is None else needed.cpu().numpy(), rel_tol))
     out = np.zeros((P.shape[0], K.shape[0]), dtype=np.bool_)
     for v in range(K.shape[0]):  # each call is parallel inside
         out[:, v] = _visibility_kernel(to_camera(V, E[v]), F, K[v], near,

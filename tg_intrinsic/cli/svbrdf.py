@@ -2,17 +2,23 @@
 its uncertainty (the normalised entropy of the power-spectrum likelihood)
 on every point of a surface from calibrated linear HDR photographs under a
 known environment map, with frequency-domain SVBRDF recovery (Wiersma et
-al., SIGGRAPH 2025): ProjectViews, FitSphericalHarmonics,
-SpectralUncertainty, then FrequencySVBRDF.fit. --write-example DIR writes
-a small synthetic scene folder (with its ground truth) to start from.
+al., SIGGRAPH 2025), as FrequencySVBRDF.recover runs it: ProjectViews,
+FitSphericalHarmonics and SpectralUncertainty, then by default the
+refinement against the full integral of the light whenever the scene
+allows it (a mesh for the visibility, or --visibility horizon for a convex
+point cloud), else the spherical-harmonic fit (--refine 0 asks for it
+alone). --write-example DIR writes a small synthetic scene folder (with
+its ground truth) to start from.
 
 Writes to --out: maps.npz (base_color [N, 3], metallic, roughness,
 entropy [N]), one PLY per map (the surface with the map as a vertex
 property: base_color_0..2 (linear), metallic, roughness, entropy; as vertex
 colours: the base colour sRGB-encoded, the others through the colormap of
 their figure; normals as nx ny nz), one PNG per map drawn on the surface
-with a colour bar, and report.json (points, views, observations per
-point, seconds per stage, losses, mean entropy, and errors against
+with a colour bar, with --texture N the maps as N x N textures
+(*_texture.png) and svbrdf.glb (glTF 2.0 with the PBR material), and
+report.json (points, views, observations per point, the steps that ran
+and their seconds, losses, mean entropy, and errors against
 ground_truth.npz when the scene folder has one). The files appear in
 --out together when all are written, replacing those of an earlier svbrdf
 run there: a failed run leaves --out as it was. --out may not hold the
@@ -51,7 +57,8 @@ def _scene_format() -> str:
 EXAMPLE = f"""examples:
   tg-intrinsic svbrdf --write-example scene     # a synthetic scene to start
   tg-intrinsic svbrdf scene --out runs/svbrdf   # maps, PLYs, PNGs, report
-  tg-intrinsic svbrdf scene --specular-model split_sum --steps 300
+  tg-intrinsic svbrdf scene --texture 512       # + textures and svbrdf.glb
+  tg-intrinsic svbrdf scene --refine 0 --solver adam   # the paper's method
   tg-intrinsic svbrdf my_capture --metallic 1 --tv-weight 0.01 --device cuda
 
 the scene folder (SCENE_DIR):

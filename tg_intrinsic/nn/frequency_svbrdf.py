@@ -358,7 +358,8 @@ class FrequencySVBRDF(torch.nn.Module):
 
         Returns:
             :class:`~tg_intrinsic.nn.svbrdf_result.SVBRDFResult`, its
-            ``seconds`` including the tables.
+            ``seconds`` including the tables, and its ``pipeline`` the
+            seconds of the visibility, the tables and the solve.
         """
         steps = check_positive_int(steps, 'steps', minimum=0)
         rounds = check_positive_int(rounds, 'rounds')
@@ -399,9 +400,11 @@ class FrequencySVBRDF(torch.nn.Module):
                              "'data.mesh_face' of texels); use 'horizon' "
                              "for point clouds")
         dtype = data.sh_in.dtype
+        parts = {}
         visible = None
         if mesh is not None and visibility != 'horizon':
             visible = direction_visibility(data.pos, data.normal, *mesh)
+        parts['visibility'] = time.perf_counter() - start
         grid = torch.linspace(math.sqrt(MIN_ALPHA), 1.0, roughness_cells,
                               dtype=dtype, device=data.sh_in.device)
         # single precision: the tables are Monte Carlo estimates (about 1%
@@ -411,6 +414,7 @@ class FrequencySVBRDF(torch.nn.Module):
             data.normal.to(single), data.obs_dir.to(single),
             data.obs_mask.bool(), envmap.to(single), grid.to(single),
             visible, light_samples, brdf_samples, seed)
+        parts['tables'] = time.perf_counter() - start - parts['visibility']
         problem = _IntegralProblem(self, data, tv_weight, tv_k, grid,
                                    irradiance.to(dtype), tables.to(dtype))
         if metallic is None and metallic_starts and steps > 0:
@@ -419,7 +423,12 @@ class FrequencySVBRDF(torch.nn.Module):
         else:
             history = self._fit_lm(problem, steps, rounds, metallic,
                                    progress)
-        return self._result(problem, history, start)
+        result = self._result(problem, history, start)
+        parts['solve'] = result.seconds - parts['visibility'] - \
+            parts['tables']
+        result.pipeline = {'seconds': {
+            key: round(value, 3) for key, value in parts.items()}}
+        return result
 
     def recover(self, data: Data, refine: str = 'auto',
                 visibility: str = 'auto', solver: Optional[str] = None,
@@ -564,13 +573,15 @@ class FrequencySVBRDF(torch.nn.Module):
                                               visibility=visibility,
                                               progress=progress))
             loss['refine'] = [result.loss[0], result.loss[-1]]
+            refine_parts = result.pipeline['seconds']
         result.seconds = time.perf_counter() - start
         result.pipeline = {
             'steps': list(seconds), 'seconds': seconds,
             'fit': {'solver': solver, 'steps': steps} if fitting else None,
             'refine': {'steps': refine_steps,
                        'visibility': 'geometry' if has_mesh
-                       and visibility != 'horizon' else 'horizon'}
+                       and visibility != 'horizon' else 'horizon',
+                       'seconds': refine_parts}
             if refining else None,
             'not_refined_because': None if refining else reason,
             'loss': loss,

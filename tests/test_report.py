@@ -316,3 +316,27 @@ def test_a_gpu_check_on_the_cpu_is_not_taken_for_results(copies):
         device='cpu', quick=True)))
     with pytest.raises(report.ReportError, match='not the results'):
         report.build_table(str(results))
+
+
+def test_the_svbrdf_rows_report_the_default_pipeline(copies):
+    results, _ = copies
+
+    def row(name):
+        return [line for line in report.build_table(str(results)).split(
+            '\n') if f'`{name}.py`' in line][0]
+    assert "**The command's default reaches issue 32's goals" in row(
+        'svbrdf_accuracy')
+
+    def all_met(data):
+        for goal in data['default_goals'].values():
+            goal['missed_by'] = []
+    edit(results / 'svbrdf_accuracy.json', all_met)
+    runs = json.loads((results / 'svbrdf_accuracy.json').read_text())[
+        'default_goals']['roughness_mae']['runs']
+    assert f"goals (roughness MAE <= 0.04, base RMSE <= 0.06) in {runs} of " \
+        f"{runs} runs**, in" in row('svbrdf_accuracy')
+    # the Mitsuba comparison names the default's stages and its verdict
+    mitsuba = [line for line in report.build_table(str(results)).split('\n')
+               if "the command's default (full-integral" in line][0]
+    assert 'tables over roughness' in mitsuba and 'goal: at most a third' \
+        in mitsuba

@@ -114,3 +114,19 @@ def device(request):
     """The device of ``pytest --device`` (indexed: cuda means cuda:0)."""
     from tg_intrinsic.devices import resolve_device
     return resolve_device(request.config.getoption('--device'), '--device')
+
+
+@pytest.fixture
+def hide_module(monkeypatch):
+    """``hide_module('xatlas')``: importing the package raises
+    ImportError for the rest of the test, as on a machine without it."""
+    import builtins
+    real_import = builtins.__import__
+    hidden = set()
+
+    def importing(name, *args, **kwargs):
+        if name.split('.')[0] in hidden:
+            raise ImportError(f'No module named {name!r}')
+        return real_import(name, *args, **kwargs)
+    monkeypatch.setattr(builtins, '__import__', importing)
+    return hidden.add

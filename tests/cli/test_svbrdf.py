@@ -473,15 +473,8 @@ def test_textures_and_a_gltf_binary(scene, point_scene, tmp_path, capsys):
 
 
 def test_textures_without_uvs_or_xatlas_say_how(scene, tmp_path, capsys,
-                                               monkeypatch):
-    import builtins
-    real_import = builtins.__import__
-
-    def no_xatlas(name, *args, **kwargs):
-        if name == 'xatlas':
-            raise ImportError('No module named xatlas')
-        return real_import(name, *args, **kwargs)
-    monkeypatch.setattr(builtins, '__import__', no_xatlas)
+                                                hide_module):
+    hide_module('xatlas')
     assert run(['svbrdf', str(scene), '--out', str(tmp_path / 'out'),
                 '--texture', '64']) == 2
     one_line_error(capsys, 'pip install xatlas', 'OBJ vt')

@@ -254,16 +254,9 @@ def test_uv_atlas_charts_cover_without_overlap():
     assert float(ratio.max() / ratio.min()) < 3
 
 
-def test_uv_atlas_without_xatlas_says_how_to_get_it(monkeypatch):
-    import builtins
+def test_uv_atlas_without_xatlas_says_how_to_get_it(hide_module):
     from tg_intrinsic.geometry import uv_atlas
-    real_import = builtins.__import__
-
-    def no_xatlas(name, *args, **kwargs):
-        if name == 'xatlas':
-            raise ImportError('No module named xatlas')
-        return real_import(name, *args, **kwargs)
-    monkeypatch.setattr(builtins, '__import__', no_xatlas)
+    hide_module('xatlas')
     pos, face = grid_mesh(3)
     with pytest.raises(ImportError, match='pip install xatlas'):
         uv_atlas(pos, face)

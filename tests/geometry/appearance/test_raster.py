@@ -11,6 +11,21 @@ from tg_intrinsic.geometry.appearance.raster import (point_visibility,
 from tests.geometry.appearance.scenes import D64, camera, small_mesh
 
 
+def moller_trumbore(d, A, B, C):
+    """Rays from the origin along ``d`` (..., 3) against triangle (A, B,
+    C): the barycentrics (u, v) of the hit and its parameter t (NaN or
+    infinite for rays parallel to the triangle)."""
+    e1, e2 = B - A, C - A
+    p = np.cross(d, e2)
+    det = p @ e1
+    with np.errstate(divide='ignore', invalid='ignore'):
+        u = (p * (-A)).sum(-1) / det
+        q = np.cross(-A, e1)
+        v = (q * d).sum(-1) / det
+        t = (q @ e2) / det
+    return u, v, t
+
+
 def brute_force_raster(V, F, K, E, height, width, near=1e-6):
     """Moller-Trumbore of every pixel-centre ray with every triangle."""
     cam = (V @ E[:, :3].T + E[:, 3]).numpy()
@@ -21,15 +36,7 @@ def brute_force_raster(V, F, K, E, height, width, near=1e-6):
     fid = np.full((height, width), -1)
     edge = np.full((height, width), np.inf)
     for f, (a, b, c) in enumerate(F.t().numpy()):
-        A, B, C = cam[a], cam[b], cam[c]
-        e1, e2 = B - A, C - A
-        p = np.cross(d, e2)
-        det = p @ e1
-        with np.errstate(divide='ignore', invalid='ignore'):
-            u = (p * (-A)).sum(-1) / det
-            q = np.cross(-A, e1)
-            v = (q * d).sum(-1) / det
-            t = (q @ e2) / det
+        u, v, t = moller_trumbore(d, cam[a], cam[b], cam[c])
         hit = (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= near)
         closer = hit & (t < best)
         best[closer] = t[closer]
@@ -101,15 +108,8 @@ def brute_force_visibility(points, V, F, K, E, height, width):
             uv[:, 1] / uv[:, 2] < height)
         hidden = np.zeros(len(pts), dtype=bool)
         for a, b, c in F.t().numpy():
-            A, B, C = cam[a], cam[b], cam[c]
-            e1, e2 = B - A, C - A
-            p = np.cross(pts, e2)
-            det = p @ e1
-            with np.errstate(divide='ignore', invalid='ignore'):
-                u = (p * (-A)).sum(-1) / det
-                q = np.cross(-A, e1)
-                w = (q * pts).sum(-1) / det
-                t = (q @ e2) / det
+            # the segment from the camera centre to the point: t in (0, 1)
+            u, w, t = moller_trumbore(pts, cam[a], cam[b], cam[c])
             hidden |= (u >= 0) & (w >= 0) & (u + w <= 1) & (t > 0) & (
                 t < 1 - 1e-9)
         out[:, v] = inside & ~hidden

@@ -913,7 +913,8 @@ class _IntegralProblem(_Problem):
             loss = (weight * (colour.unsqueeze(1) * slope + offset
                               - target).abs()).sum((1, 3))   # [N, R]
             loss, cell = loss.min(1)
-            found = (colour[torch.arange(cell.numel()), cell],
+            found = (colour[torch.arange(cell.numel(), device=cell.device),
+                            cell],
                      torch.full_like(loss, metallic), self.grid[cell])
             if best is None:
                 best_loss, best = loss, found

@@ -1440,13 +1440,6 @@ def ddp_training(d, _):
 GPU_CLAIM = 'CUDA: the test suite on the GPU, and the GPU speed goals'
 
 
-def goal_text(value: float, goal: float, fmt: Callable[[float], str],
-              at_least: bool = False) -> str:
-    met = value >= goal if at_least else value <= goal
-    return (f"{fmt(value)} (goal {'>=' if at_least else '<='} {fmt(goal)}, "
-            f"{'met' if met else '**not met**'})")
-
-
 def two_digits(x: float) -> str:
     """150, 12, 0.8: two significant digits, no trailing zeros."""
     return f'{float(f"{x:.2g}"):g}'
@@ -1468,7 +1461,6 @@ def gpu(d, _):
     if d['quick'] or d['device'] == 'cpu':
         raise ValueError('gpu.json is a --quick or CPU check, not the '
                          'results: run benchmarks/gpu.py on a GPU')
-    goals = d['goals']
     parts = []
     failed = [f"{name} failed ({d[name]['error'][:60]})" for name in (
         'device_tests', 'neighbours', 'networks', 'uncertainty', 'svbrdf',
@@ -1476,25 +1468,33 @@ def gpu(d, _):
     if 'error' not in d['device_tests']:
         t = d['device_tests']
         parts.append(f"`pytest --device cuda`: {t['summary']}")
+    # the stages' figures (not the goals, verdicts or machine)
+    figures = {key: value for name, part in d.items()
+               if name not in ('goals', 'met', 'machine')
+               and isinstance(part, dict) for key, value in part.items()}
+
+    def goal(key, fmt):
+        """A figure against its goal, as gpu.py judged it."""
+        sign = '>=' if key in d['at_least'] else '<='
+        return (f"{fmt(figures[key])} (goal {sign} {fmt(d['goals'][key])}, "
+                f"{'met' if d['met'][key] else '**not met**'})")
     if 'error' not in d['neighbours']:
         n = d['neighbours']
         parts.append(
-            f"knn on 100k points {goal_text(n['knn_100k_s'], goals['knn_100k_s'], milliseconds)}, "  # noqa: E501
-            f"on 32 x 1024 {goal_text(n['knn_32x1024_s'], goals['knn_32x1024_s'], milliseconds)}, "  # noqa: E501
+            f"knn on 100k points {goal('knn_100k_s', milliseconds)}, on "
+            f"32 x 1024 {goal('knn_32x1024_s', milliseconds)}, "
             f"{'the same' if n['knn_same_graph_as_cpu'] else '**not the same**'} "  # noqa: E501
             f"graph as the CPU; MLS operators {in_seconds(n['mls_100k_s'])} / "
             f"{milliseconds(n['mls_32x1024_s'])}")
     if 'error' not in d['networks']:
-        n = d['networks']
         parts.append(
             f"DeltaNet step on 32 x 1024, operators in the forward, "
-            f"{goal_text(n['deltanet_step_s'], goals['deltanet_step_s'], milliseconds)}, "  # noqa: E501
-            f"EdgeConv DGCNN {milliseconds(n['dgcnn_step_s'])}: "
-            f"{goal_text(n['deltanet_vs_dgcnn'], goals['deltanet_vs_dgcnn'], lambda x: times(x, 2), True)}")  # noqa: E501
+            f"{goal('deltanet_step_s', milliseconds)}, EdgeConv DGCNN "
+            f"{milliseconds(figures['dgcnn_step_s'])}: "
+            f"{goal('deltanet_vs_dgcnn', lambda x: times(x, 2))}")
     if 'error' not in d['uncertainty']:
-        u = d['uncertainty']['spectral_uncertainty_100k_s']
         parts.append(f"spectral uncertainty of 100k points "
-                     f"{goal_text(u, goals['spectral_uncertainty_100k_s'], milliseconds)}")  # noqa: E501
+                     f"{goal('spectral_uncertainty_100k_s', milliseconds)}")
     if 'error' not in d['svbrdf']:
         s = d['svbrdf']
         parts.append(f"`svbrdf --refine 10` on 2562 points x 25 views "
@@ -1502,11 +1502,10 @@ def gpu(d, _):
                      f"{in_seconds(s['svbrdf_cpu']['wall_s'])} on its CPU "
                      f"({times(s['svbrdf_speedup'], 2)})")
     if 'error' not in d['epochs']:
-        e = d['epochs']
         parts.append(
             f"SHREC'11-protocol epochs: DeltaNet "
-            f"{goal_text(e['deltanet_epoch_s'], goals['deltanet_epoch_s'], in_seconds)}, "  # noqa: E501
-            f"HSN {goal_text(e['hsn_epoch_s'], goals['hsn_epoch_s'], in_seconds)}")  # noqa: E501
+            f"{goal('deltanet_epoch_s', in_seconds)}, HSN "
+            f"{goal('hsn_epoch_s', in_seconds)}")
     text = f"{d['device']}, {in_seconds(d['seconds'])} in all: " + \
         '; '.join(parts + failed)
     return [(GPU_CLAIM, 'gpu.py', text.replace('|', '/'))]

@@ -140,16 +140,21 @@ def write_textured_model(folder: str, pos, face, maps: dict, size: int,
     made = face_uv is None
     face_uv = uv_atlas(pos, face) if made else \
         torch.as_tensor(face_uv).detach().cpu().double()
+    # every map's columns side by side: one rasterisation for all of them
+    keys = [key for key in TEXTURE_FILES if key in maps]
+    columns = [np.asarray(maps[key], dtype=np.float64).reshape(
+        len(pos), -1) for key in keys]
+    texture, coverage = bake_texture(
+        torch.from_numpy(np.concatenate(columns, 1)), face, face_uv,
+        (size, size))
+    widths = np.cumsum([0] + [c.shape[1] for c in columns])
     textures, files = {}, []
-    for key, name in TEXTURE_FILES.items():
-        if key not in maps:
-            continue
-        values = torch.as_tensor(np.asarray(maps[key], dtype=np.float64))
-        texture, coverage = bake_texture(values, face, face_uv, (size, size))
-        textures[key] = texture.numpy()
+    for key, start, stop in zip(keys, widths[:-1], widths[1:]):
+        textures[key] = texture[..., start:stop].squeeze(-1).numpy()
         image = srgb_encode(textures[key]) if key == 'base_color' \
             else textures[key]
-        files.append(write_png(os.path.join(folder, name), image))
+        files.append(write_png(os.path.join(folder, TEXTURE_FILES[key]),
+                               image))
     files.append(write_glb(
         os.path.join(folder, GLB_FILE), pos.numpy(), face.t().numpy(),
         face_uv.numpy(), textures['base_color'], textures['metallic'],

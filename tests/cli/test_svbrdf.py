@@ -18,7 +18,7 @@ from tg_intrinsic.io.results import RECORD
 
 TINY = ['--example-views', '8', '--example-image-size', '32',
         '--example-subdivisions', '2']
-MAPS = ('base_color', 'metallic', 'roughness', 'entropy')
+MAPS = ('base_color', 'metallic', 'roughness', 'entropy', 'roughness_std')
 
 
 def run(argv):
@@ -96,11 +96,13 @@ def test_recovery_writes_maps_plys_figures_and_report(scene, tmp_path,
     assert report['options']['l_max'] == 5
     assert np.isfinite(report['loss']['refine']).all()
     assert 0 <= report['mean_entropy'] <= 1
+    assert 0 < report['mean_roughness_std'] <= 1
     truth = report['ground_truth']
     for key in ('roughness_mae', 'base_color_rmse', 'metallic_mae'):
         assert 0 <= truth[key] < 1, key
-    rho = truth['entropy_roughness_error_spearman']
-    assert rho is None or -1 <= rho <= 1
+    for name in ('entropy', 'roughness_std'):
+        rho = truth[f'{name}_roughness_error_spearman']
+        assert rho is None or -1 <= rho <= 1
     assert [n for n in os.listdir(out) if n.startswith('.')] == [RECORD]
     assert not [n for n in os.listdir(tmp_path) if n.startswith('.')]
 
@@ -453,7 +455,7 @@ def test_textures_and_a_gltf_binary(scene, point_scene, tmp_path, capsys):
     assert run(['svbrdf', str(scene), '--out', str(out), '--texture', '64',
                 '--refine', '0', '--steps', '2']) == 0
     assert '64 x 64 textures on an atlas' in capsys.readouterr().out
-    for name in ('base_color', 'metallic', 'roughness', 'entropy'):
+    for name in MAPS:
         assert (out / f'{name}_texture.png').is_file()
     gltf = pygltflib.GLTF2().load(str(out / 'svbrdf.glb'))
     assert gltf.materials[0].pbrMetallicRoughness.metallicRoughnessTexture \

@@ -28,7 +28,8 @@ def smooth_maps(pos):
                                        0.5 + 0.3 * z], 1).numpy(),
             'metallic': (0.5 + 0.4 * x).numpy(),
             'roughness': (0.5 + 0.4 * z).numpy(),
-            'entropy': (0.5 + 0.4 * y).numpy()}
+            'entropy': (0.5 + 0.4 * y).numpy(),
+            'roughness_std': (0.05 + 0.04 * x).numpy()}
 
 
 def accessor(gltf, blob, index):
@@ -115,6 +116,10 @@ def test_glb_holds_the_pbr_material_and_the_maps(tmp_path, given_uv):
     entropy = np.asarray(Image.open(tmp_path / TEXTURE_FILES['entropy'])
                          ).astype(np.float64) / 255
     assert entropy.shape == (256, 256)
+    # an uncertainty of 0-0.1 spans the grey values: 0.1 is white
+    std = np.asarray(Image.open(tmp_path / TEXTURE_FILES['roughness_std'])
+                     ).astype(np.float64) / 255
+    assert close(std[rows, cols] / 10, maps['roughness_std'])
     # a second reader opens it with its material
     import trimesh
     loaded = trimesh.load(str(tmp_path / GLB_FILE), force='mesh')

@@ -180,9 +180,10 @@ def test_texels_and_export(tmp_path):
     paths = result.save(str(tmp_path))
     names = sorted(os.path.basename(p) for p in paths)
     assert names == ['base_color.png', 'entropy.png', 'maps.npz',
-                     'metallic.png', 'roughness.png']
+                     'metallic.png', 'roughness.png', 'roughness_std.png']
     maps = np.load(tmp_path / 'maps.npz')
     assert maps['base_color'].shape == (8, 8, 3)
+    assert maps['roughness_std'].shape == (8, 8)
     assert np.allclose(maps['roughness'].ravel(), result.roughness.numpy())
     assert not any(p.startswith('.tmp') for p in os.listdir(tmp_path))
     # point maps are splatted into a view
@@ -571,8 +572,63 @@ def test_recover_refines_whenever_the_capture_allows_it():
     assert lines[0] == 'projecting the points into the views ...'
     assert lines[-1].startswith('refining against the full integral')
     assert prepared.entropy.shape == (scene.num_nodes, )
+    assert result.roughness_std.shape == (scene.num_nodes, )
+    assert bool((result.roughness_std > 0).all())
     # what the model holds is what was returned
     assert torch.equal(model.roughness.detach(), result.roughness)
+
+
+def test_roughness_variance_is_the_spread_over_noise_draws():
+    """The sandwich variance of each point's L1 fit against brute force:
+    the standard deviation of the fitted roughness over independent noise
+    draws on the same capture."""
+    from scipy.stats import spearmanr
+    from tg_intrinsic.nn.frequency_svbrdf import _Problem
+    data, _ = self_consistent_data(60, 40)
+    clean = data.obs_radiance.clone()
+    scale = float(clean[data.obs_mask].abs().mean())
+    generator = torch.Generator().manual_seed(0)
+    fitted, predicted = [], []
+    for _ in range(16):
+        noise = torch.randn(clean.shape, generator=generator,
+                            dtype=clean.dtype)
+        data.obs_radiance = clean + 0.05 * scale * noise \
+            * data.obs_mask.unsqueeze(-1)
+        model = FrequencySVBRDF(60)
+        fitted.append(model.fit(data, solver='lm', steps=30,
+                                progress=False).roughness)
+        problem = _Problem(model, data, 0.0, 8)
+        problem.refresh()
+        predicted.append(problem.roughness_variance(fixed_metallic=False))
+    empirical = torch.stack(fitted).std(0)
+    predicted = torch.stack(predicted).mean(0).sqrt()
+    ratio = predicted / empirical
+    assert 0.75 < float(ratio.median()) < 1.5
+    assert spearmanr(predicted, empirical).statistic > 0.8
+
+
+def test_roughness_std_adds_the_neighbours_spread():
+    from tg_intrinsic.nn.frequency_svbrdf import _Problem
+    data, _ = self_consistent_data(40, 12)
+    data.obs_mask[7] = False  # a point no view sees
+    model = FrequencySVBRDF(40)
+    result = model.fit(data, solver='lm', steps=5, progress=False)
+    problem = _Problem(model, data, 0.0, 8)
+    problem.refresh()
+    edges = model._graph(data, 8).t().tolist()
+    r = result.roughness.double()
+    for i in range(40):  # brute force: every edge at either end
+        touching = [abs(float(r[a] - r[b])) for a, b in edges if i in (a, b)]
+        assert problem.neighbour_spread()[i].item() == pytest.approx(
+            sum(touching) / len(touching))
+    variance = problem.roughness_variance(fixed_metallic=False)
+    assert math.isinf(variance[7]) and result.roughness_std[7] == 1
+    expected = (variance + problem.neighbour_spread() ** 2).sqrt()
+    std = problem.roughness_std(fixed_metallic=False)
+    seen = torch.arange(40) != 7
+    torch.testing.assert_close(std[seen], expected[seen].clamp(max=1))
+    assert std[7] == 1
+    assert bool((result.roughness_std > 0).all())
 
 
 def test_recover_without_a_mesh():

@@ -12,7 +12,7 @@ from tg_intrinsic.nn.svbrdf_result import MAP_INFO
 from tests.conftest import grid_mesh
 
 
-def result(n=6, entropy=True, texture_shape=None, seed=0):
+def result(n=6, entropy=True, texture_shape=None, seed=0, std=False):
     g = torch.Generator().manual_seed(seed)
     return SVBRDFResult(
         base_color=torch.rand(n, 3, generator=g, dtype=torch.float64),
@@ -20,6 +20,9 @@ def result(n=6, entropy=True, texture_shape=None, seed=0):
         roughness=torch.rand(n, generator=g, dtype=torch.float64),
         entropy=(torch.rand(n, generator=g, dtype=torch.float64)
                  if entropy else None),
+        roughness_std=(0.01 + 0.1 * torch.rand(n, generator=g,
+                                               dtype=torch.float64)
+                       if std else None),
         loss=[2.0, 1.0], seconds=0.5, texture_shape=texture_shape)
 
 
@@ -70,12 +73,12 @@ def test_npz_round_trip(tmp_path):
 
 
 def test_texel_maps_are_written_as_textures(tmp_path):
-    res = result(texture_shape=(2, 3))
+    res = result(texture_shape=(2, 3), std=True)
     res.base_color[0] = torch.tensor([1.3, -0.2, 0.5])  # clipped
     paths = res.save(str(tmp_path / 'out'))
     names = [os.path.basename(p) for p in paths]
     assert names == ['maps.npz', 'base_color.png', 'metallic.png',
-                     'roughness.png', 'entropy.png']
+                     'roughness.png', 'entropy.png', 'roughness_std.png']
     maps = res.maps()
     np.testing.assert_allclose(read_png(paths[1]),
                                quantised(maps['base_color']), atol=1e-6)
@@ -88,6 +91,11 @@ def test_texel_maps_are_written_as_textures(tmp_path):
     np.testing.assert_allclose(read_png(paths[4]),
                                quantised(turbo(maps['entropy'])[..., :3]),
                                atol=1e-6)
+    # the roughness's standard deviation over its range, 0 to 0.1
+    assert MAP_INFO['roughness_std']['range'] == (0.0, 0.1)
+    np.testing.assert_allclose(
+        read_png(paths[5]), quantised(turbo(np.clip(
+            maps['roughness_std'] / 0.1, 0, 1))[..., :3]), atol=1e-6)
     assert sorted(os.listdir(tmp_path / 'out')) == sorted(names)
 
 
@@ -189,6 +197,69 @@ def test_merge_by_entropy_rejects_bad_inputs():
     with pytest.raises(ValueError, match='texture_shape'):
         SVBRDFResult.merge_by_entropy([result(), result(
             texture_shape=(2, 3))])
+
+
+# ------------------------------------------------- merge by uncertainty
+def test_merge_by_uncertainty_weights_by_inverse_variance():
+    inputs = [result(n=30, seed=s, std=True) for s in range(3)]
+    merged, weight = SVBRDFResult.merge_by_uncertainty(inputs)
+    assert weight.shape == (3, 30)
+    torch.testing.assert_close(weight.sum(0), torch.ones(30,
+                                                         dtype=weight.dtype))
+    for i in range(30):  # brute force, point by point
+        precision = [1 / r.roughness_std[i].item() ** 2 for r in inputs]
+        total = sum(precision)
+        for name in ('base_color', 'metallic', 'roughness'):
+            expected = sum(p * getattr(r, name)[i] for p, r in zip(
+                precision, inputs)) / total
+            torch.testing.assert_close(getattr(merged, name)[i], expected)
+        assert merged.roughness_std[i].item() == pytest.approx(
+            total ** -0.5)
+    # the merged uncertainty is below every input's
+    assert bool((merged.roughness_std <= torch.stack(
+        [r.roughness_std for r in inputs]).min(0).values).all())
+    assert merged.entropy is None and merged.loss == []
+    assert merged.seconds == pytest.approx(3 * 0.5)
+
+
+def test_merge_by_uncertainty_equal_is_the_average_and_certain_wins():
+    inputs = [result(n=20, seed=s, std=True) for s in range(4)]
+    for r in inputs:
+        r.roughness_std = torch.full_like(r.roughness, 0.05)
+    merged, _ = SVBRDFResult.merge_by_uncertainty(inputs)
+    torch.testing.assert_close(merged.base_color, torch.stack(
+        [r.base_color for r in inputs]).mean(0))
+    # a recovery a thousand times more certain decides the point
+    inputs[2].roughness_std[:5] = 5e-5
+    merged, weight = SVBRDFResult.merge_by_uncertainty(inputs)
+    assert bool((weight[2, :5] > 0.999).all())
+    torch.testing.assert_close(merged.roughness[:5],
+                               inputs[2].roughness[:5], atol=1e-3, rtol=0)
+    # the order of the inputs does not matter
+    permuted, permuted_weight = SVBRDFResult.merge_by_uncertainty(
+        inputs[::-1])
+    torch.testing.assert_close(permuted.roughness, merged.roughness)
+    torch.testing.assert_close(permuted_weight, weight.flip(0))
+
+
+def test_merge_by_uncertainty_rejects_bad_inputs():
+    with pytest.raises(ValueError, match='non-empty'):
+        SVBRDFResult.merge_by_uncertainty([])
+    with pytest.raises(ValueError, match='no roughness_std'):
+        SVBRDFResult.merge_by_uncertainty([result(std=True), result()])
+    zero = result(std=True)
+    zero.roughness_std[1] = 0.0
+    with pytest.raises(ValueError, match='zero or negative'):
+        SVBRDFResult.merge_by_uncertainty([result(std=True), zero])
+    nan = result(std=True)
+    nan.roughness_std[3] = float('inf')
+    with pytest.raises(ValueError, match='NaN or infinite'):
+        SVBRDFResult.merge_by_uncertainty([result(std=True), nan])
+    with pytest.raises(ValueError, match='same 6 points'):
+        SVBRDFResult.merge_by_uncertainty([result(std=True),
+                                           result(n=7, std=True)])
+
+
 def texel_result(texel_index=(5, 0, 2, 3), texture_shape=(2, 3)):
     """Points on some texels of a texture: a partial texture."""
     res = result(n=len(texel_index), texture_shape=texture_shape)

@@ -1,5 +1,6 @@
 """Recovers a spatially varying BRDF (base colour, metallic, roughness) and
-its uncertainty (the normalised entropy of the power-spectrum likelihood)
+its uncertainty (the estimated standard deviation of the roughness of the
+final fit, and the normalised entropy of the power-spectrum likelihood)
 on every point of a surface from calibrated linear HDR photographs under a
 known environment map, with frequency-domain SVBRDF recovery (Wiersma et
 al., SIGGRAPH 2025), as FrequencySVBRDF.recover runs it: ProjectViews,
@@ -11,14 +12,15 @@ alone). --write-example DIR writes a small synthetic scene folder (with
 its ground truth) to start from.
 
 Writes to --out: maps.npz (base_color [N, 3], metallic, roughness,
-entropy [N]), one PLY per map (the surface with the map as a vertex
-property: base_color_0..2 (linear), metallic, roughness, entropy; as vertex
+entropy, roughness_std [N]), one PLY per map (the surface with the map as
+a vertex property: base_color_0..2 (linear), metallic, roughness, entropy,
+roughness_std; as vertex
 colours: the base colour sRGB-encoded, the others through the colormap of
 their figure; normals as nx ny nz), one PNG per map drawn on the surface
 with a colour bar, with --texture N the maps as N x N textures
 (*_texture.png) and svbrdf.glb (glTF 2.0 with the PBR material), and
 report.json (points, views, observations per point, the steps that ran
-and their seconds, losses, mean entropy, and errors against
+and their seconds, losses, mean uncertainties, and errors against
 ground_truth.npz when the scene folder has one). The files appear in
 --out together when all are written, replacing those of an earlier svbrdf
 run there: a failed run leaves --out as it was. --out may not hold the
@@ -34,7 +36,8 @@ from .common import (UsageError, default_of, stage, nonnegative_float,
 
 HELP = 'recover SVBRDF maps and their uncertainty from HDR photographs'
 
-MAP_NAMES = ('base_color', 'metallic', 'roughness', 'entropy')
+MAP_NAMES = ('base_color', 'metallic', 'roughness', 'entropy',
+             'roughness_std')
 SPECULAR_MODELS = ('eq5.11', 'split_sum')
 VISIBILITY = ('auto', 'geometry', 'horizon')
 # a 16k x 16k texture is 1 GB per map: larger is a typing mistake
@@ -177,7 +180,8 @@ def add_arguments(parser):
                         help='also write the maps as N x N textures on the '
                         'mesh\'s UVs (an atlas is made with xatlas when it '
                         'has none): base_color/metallic/roughness/'
-                        'entropy_texture.png and svbrdf.glb, a glTF 2.0 '
+                        'entropy/roughness_std_texture.png and svbrdf.glb, '
+                        'a glTF 2.0 '
                         'binary with the PBR material that Blender and glTF '
                         'viewers open (the thesis: 512)')
     parser.add_argument('--device', default='cpu',
@@ -398,6 +402,7 @@ def _recover(args, data, truth, device, seconds, start, out) -> dict:
         'loss': pipeline['loss'],
         'texture': texture,
         'mean_entropy': float(np.mean(maps['entropy'])),
+        'mean_roughness_std': float(np.mean(maps['roughness_std'])),
         'ground_truth': None if truth is None else _errors(maps, truth),
         'files': sorted(os.path.basename(f) for f in files) + ['report.json'],
         'tg_intrinsic': tg_intrinsic.__version__,
@@ -509,7 +514,7 @@ def _numpy_problem(error: ValueError, what: str) -> str:
 
 def _errors(maps: dict, truth: dict) -> dict:
     """Errors of the recovered maps against the ground truth, and how well
-    the entropy ranks the points by their roughness error."""
+    each uncertainty ranks the points by their roughness error."""
     import numpy as np
     from scipy.stats import spearmanr
     error = np.abs(maps['roughness'] - truth['roughness'])
@@ -521,11 +526,12 @@ def _errors(maps: dict, truth: dict) -> dict:
     if 'metallic' in truth:
         out['metallic_mae'] = float(np.abs(maps['metallic']
                                            - truth['metallic']).mean())
-    rho = float('nan')
-    if np.ptp(maps['entropy']) > 0 and np.ptp(error) > 0:
-        rho = float(spearmanr(maps['entropy'], error).statistic)
-    out['entropy_roughness_error_spearman'] = None if np.isnan(rho) \
-        else rho
+    for name in ('roughness_std', 'entropy'):
+        rho = float('nan')
+        if np.ptp(maps[name]) > 0 and np.ptp(error) > 0:
+            rho = float(spearmanr(maps[name], error).statistic)
+        out[f'{name}_roughness_error_spearman'] = None if np.isnan(rho) \
+            else rho
     return out
 
 
@@ -536,7 +542,7 @@ def _write_outputs(out: str, data, result, maps: dict, name: str) -> list:
     from tg_intrinsic.io import write_ply
     from tg_intrinsic.io.figures import draw_surface
     from tg_intrinsic.io.gltf import srgb_encode
-    from tg_intrinsic.nn.svbrdf_result import MAP_INFO
+    from tg_intrinsic.nn.svbrdf_result import MAP_INFO, scaled_to_range
 
     pos = data.pos.detach().cpu().double().numpy()
     normal = data.normal.detach().cpu().double().numpy()
@@ -552,7 +558,7 @@ def _write_outputs(out: str, data, result, maps: dict, name: str) -> list:
             colors = srgb_encode(value)
         else:
             colormap = matplotlib.colormaps[info['cmap']]
-            colors = colormap(np.clip(value, 0, 1))[:, :3]
+            colors = colormap(scaled_to_range(key, value))[:, :3]
         files.append(write_ply(os.path.join(out, f'{key}.ply'), pos,
                                None if face is None else face.T,
                                {key: value, **normals}, colors=colors))
@@ -566,7 +572,8 @@ def _write_outputs(out: str, data, result, maps: dict, name: str) -> list:
             files.append(draw_surface(
                 os.path.join(out, f'{key}.png'), pos, face, values=value,
                 normal=normal, title=title, label=info['label'],
-                cmap=info['cmap'], vmin=0.0, vmax=1.0))
+                cmap=info['cmap'], vmin=info['range'][0],
+                vmax=info['range'][1]))
     return files
 
 
@@ -578,7 +585,9 @@ def _print_summary(out: str, report: dict):
         f"{seen['mean']:.1f} observations per point on average"
         + (f", {seen['unseen_points']} points unseen"
            if seen['unseen_points'] else ''),
-        f"mean entropy {report['mean_entropy']:.3f}"]
+        f"mean roughness uncertainty (std) "
+        f"{report['mean_roughness_std']:.3f}, mean entropy "
+        f"{report['mean_entropy']:.3f}"]
     if pipeline['fit'] is not None:
         fit = pipeline['fit']
         lines.append(f"spherical-harmonic fit: {fit['solver']}, "
@@ -594,14 +603,14 @@ def _print_summary(out: str, report: dict):
         lines.append(f"{name} loss {first:.4g} -> {last:.4g}")
     truth = report['ground_truth']
     if truth is not None:
-        rho = truth['entropy_roughness_error_spearman']
+        rho = truth['roughness_std_roughness_error_spearman']
         lines.append(
             f"against the ground truth: roughness MAE "
             f"{truth['roughness_mae']:.3f}, base colour RMSE "
             f"{truth['base_color_rmse']:.3f}"
             + (f", metallic MAE {truth['metallic_mae']:.3f}"
                if 'metallic_mae' in truth else '')
-            + f", Spearman(entropy, roughness error) "
+            + f", Spearman(roughness std, roughness error) "
             f"{'n/a' if rho is None else f'{rho:+.2f}'}")
     texture = report['texture']
     textures = '' if texture is None else (

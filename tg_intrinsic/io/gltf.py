@@ -101,7 +101,8 @@ def write_glb(path: str, pos: np.ndarray, face: np.ndarray,
 TEXTURE_FILES = {'base_color': 'base_color_texture.png',
                  'metallic': 'metallic_texture.png',
                  'roughness': 'roughness_texture.png',
-                 'entropy': 'entropy_texture.png'}
+                 'entropy': 'entropy_texture.png',
+                 'roughness_std': 'roughness_std_texture.png'}
 GLB_FILE = 'svbrdf.glb'
 
 
@@ -110,8 +111,10 @@ def write_textured_model(folder: str, pos, face, maps: dict, size: int,
     r"""Per-vertex material maps as :math:`N \times N` textures on the
     mesh's UVs (:func:`~tg_intrinsic.geometry.uv_atlas` makes an atlas
     when there are none) and a textured glTF binary: the files of
-    :data:`TEXTURE_FILES` (base colour sRGB-encoded; metallic, roughness
-    and the entropy as linear grey values) and :data:`GLB_FILE`, each
+    :data:`TEXTURE_FILES` (base colour sRGB-encoded; the other maps as
+    linear grey values over their range in
+    :data:`~tg_intrinsic.nn.svbrdf_result.MAP_INFO`: [0, 1], and [0, 0.1]
+    for ``roughness_std``) and :data:`GLB_FILE`, each
     written atomically into ``folder``. Baking
     (:func:`~tg_intrinsic.geometry.bake_texture`) runs on the CPU.
 
@@ -120,8 +123,8 @@ def write_textured_model(folder: str, pos, face, maps: dict, size: int,
         pos (torch.Tensor): Vertices :math:`(V, 3)`.
         face (torch.Tensor): Triangles :math:`(3, F)`.
         maps (dict): ``base_color`` :math:`(V, 3)`, ``metallic``,
-            ``roughness`` and optionally ``entropy`` :math:`(V)` (numpy or
-            torch).
+            ``roughness`` and optionally ``entropy`` and ``roughness_std``
+            :math:`(V)` (numpy or torch).
         size (int): Texture side :math:`N`.
         face_uv (torch.Tensor, optional): UVs per corner :math:`(3, F, 2)`.
             (default: :obj:`None`, an atlas is made)
@@ -135,6 +138,7 @@ def write_textured_model(folder: str, pos, face, maps: dict, size: int,
     import os
     import torch
     from tg_intrinsic.geometry import bake_texture, uv_atlas
+    from tg_intrinsic.nn.svbrdf_result import scaled_to_range
     pos = torch.as_tensor(pos).detach().cpu().double()
     face = torch.as_tensor(face).detach().cpu()
     made = face_uv is None
@@ -152,7 +156,7 @@ def write_textured_model(folder: str, pos, face, maps: dict, size: int,
     for key, start, stop in zip(keys, widths[:-1], widths[1:]):
         textures[key] = texture[..., start:stop].squeeze(-1).numpy()
         image = srgb_encode(textures[key]) if key == 'base_color' \
-            else textures[key]
+            else scaled_to_range(key, textures[key])
         files.append(write_png(os.path.join(folder, TEXTURE_FILES[key]),
                                image))
     files.append(write_glb(

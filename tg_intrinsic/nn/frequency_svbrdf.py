@@ -285,7 +285,8 @@ class FrequencySVBRDF(torch.nn.Module):
         else:
             history = self._fit_adam(problem, steps, lr, shadowing_every,
                                      metallic, progress)
-        return self._result(problem, history, start)
+        return self._result(problem, history, start,
+                            fixed_metallic=metallic is not None)
 
     def refine(self, data: Data, envmap: Optional[Tensor] = None,
                steps: int = REFINE_STEPS, rounds: int = 2,
@@ -424,7 +425,8 @@ class FrequencySVBRDF(torch.nn.Module):
         else:
             history = self._fit_lm(problem, steps, rounds, metallic,
                                    progress)
-        result = self._result(problem, history, start)
+        result = self._result(problem, history, start,
+                              fixed_metallic=metallic is not None)
         parts['solve'] = result.seconds - parts['visibility'] - \
             parts['tables']
         result.pipeline = {'seconds': {
@@ -608,7 +610,8 @@ class FrequencySVBRDF(torch.nn.Module):
                     parameter))
         return self._fit_lm(problem, steps, rounds, None, progress)
 
-    def _result(self, problem, history, start) -> SVBRDFResult:
+    def _result(self, problem, history, start,
+                fixed_metallic: bool) -> SVBRDFResult:
         with torch.no_grad():
             final = float(problem.loss(self.base_color, self.metallic,
                                        self.roughness))
@@ -618,6 +621,7 @@ class FrequencySVBRDF(torch.nn.Module):
             metallic=self.metallic.detach().clone(),
             roughness=self.roughness.detach().clone(),
             entropy=getattr(problem.data, 'entropy', None),
+            roughness_std=problem.roughness_std(fixed_metallic),
             loss=history + [final], seconds=time.perf_counter() - start,
             texture_shape=texture_shape, texel_index=texel_index)
 
@@ -809,7 +813,7 @@ class _Problem:
         self.radiance_scale = float(seen.abs().mean()) if seen.numel() \
             else 1.0
         self.l_max = int(round(math.sqrt(data.sh_in.size(1)))) - 1
-        self.tv_weight = tv_weight
+        self.tv_weight, self.tv_k = tv_weight, tv_k
         self.edges = model._graph(data, tv_k) if tv_weight > 0 \
             else None
         # the residuals' weights, one row per point, as the solvers take them
@@ -856,6 +860,85 @@ class _Problem:
         if self.edges is not None:
             loss = loss + self.tv_weight * model.total_variation(self.edges)
         return loss
+
+    def roughness_std(self, fixed_metallic: bool) -> Tensor:
+        r"""The estimated standard deviation of every point's roughness
+        at the current parameters :math:`(N)`,
+        :math:`s_i = \sqrt{v_i + d_i^2}`, clamped to 1 (the whole range;
+        also the value of points with no more observations than
+        unknowns): the sampling variance :math:`v_i` of the point's
+        weighted L1 fit (:meth:`roughness_variance`) and the mean absolute
+        roughness difference :math:`d_i` to its neighbours
+        (:meth:`neighbour_spread`), which grows where the smoothing meets
+        a change that the data do not settle."""
+        variance = self.roughness_variance(fixed_metallic)
+        std = (variance + self.neighbour_spread() ** 2).sqrt()
+        return torch.where(torch.isfinite(std), std.clamp(max=1.0),
+                           torch.ones_like(std))
+
+    def roughness_variance(self, fixed_metallic: bool) -> Tensor:
+        r"""The asymptotic variance of the roughness of each point's
+        weighted L1 fit (an M-estimator's sandwich), its residuals
+        :math:`e_k` taken as independent Gaussian noise of one scale per
+        point,
+
+        .. math::
+            \operatorname{Cov} = \frac{\pi \hat\sigma_i^2}{2}\,
+            A^{-1} B A^{-1}, \quad A = \sum_k w_k \mathbf{J}_k^\top
+            \mathbf{J}_k, \quad B = \sum_k w_k^2 \mathbf{J}_k^\top
+            \mathbf{J}_k, \quad \hat\sigma_i^2 = \frac{\pi}{2}
+            \frac{n_i}{n_i - p} \Big(\frac{\sum_k w_k |e_k|}{\sum_k w_k}
+            \Big)^2
+
+        (:math:`\pi \sigma^2 / 2 = 1 / (4 f(0)^2)` for a Gaussian density
+        :math:`f`; :math:`n_i` observed values, :math:`p` unknowns), its
+        roughness entry :math:`(N)`; infinite where :math:`n_i \le p`."""
+        model = self.model
+        columns = [0, 1, 2, 4] if fixed_metallic else [0, 1, 2, 3, 4]
+        num, unknowns = self.target.size(0), len(columns)
+        with torch.no_grad():
+            pred, jac = self.predict(model.base_color, model.metallic,
+                                     model.roughness, jacobian=True)
+            error = (pred - self.target).reshape(num, -1).abs()
+            jac = jac[..., columns].reshape(num, -1, unknowns)
+            weight = self.weight.expand_as(self.target).reshape(num, -1)
+            weight = weight / weight.amax(1, keepdim=True).clamp_min(1e-300)
+            outer = torch.einsum('nki,nkj->nkij', jac, jac)
+            a = torch.einsum('nk,nkij->nij', weight, outer)
+            b = torch.einsum('nk,nkij->nij', weight ** 2, outer)
+            # a relative ridge: directions no observation sees stay unknown
+            # instead of failing the inverse
+            ridge = 1e-9 * a.diagonal(dim1=1, dim2=2).mean(1) + 1e-300
+            a_inverse = torch.linalg.inv(a + ridge.view(-1, 1, 1) * torch.eye(
+                unknowns, dtype=a.dtype, device=a.device))
+            sandwich = (a_inverse @ b @ a_inverse)[:, -1, -1].clamp_min(0)
+            observed = (weight > 0).sum(1).to(a.dtype)
+            mean_error = (weight * error).sum(1) / weight.sum(1).clamp_min(
+                1e-300)
+            sigma2 = math.pi / 2 * mean_error ** 2 * observed / (
+                observed - unknowns).clamp_min(1e-300)
+            variance = math.pi / 2 * sigma2 * sandwich
+            return torch.where(observed > unknowns, variance,
+                               torch.full_like(variance, math.inf))
+
+    def neighbour_spread(self) -> Tensor:
+        r"""Each point's mean absolute roughness difference to its
+        neighbours in the total variation's graph (built for this when
+        the fit had no total variation)
+        :math:`d_i = \frac{1}{|\mathcal{N}(i)|} \sum_{j \in
+        \mathcal{N}(i)} |r_i - r_j|` :math:`(N)`."""
+        edges = self.edges if self.edges is not None \
+            else self.model._graph(self.data, self.tv_k)
+        i, j = edges
+        roughness = self.model.roughness.detach().to(self.dtype)
+        difference = (roughness[i] - roughness[j]).abs()
+        # both ends: the same for a graph that holds both directions
+        total = torch.zeros_like(roughness).index_add_(
+            0, i, difference).index_add_(0, j, difference)
+        count = torch.zeros_like(roughness).index_add_(
+            0, i, torch.ones_like(difference)).index_add_(
+                0, j, torch.ones_like(difference))
+        return total / count.clamp_min(1)
 
     def residual(self, columns):
         """The residuals of the points ``rows`` at parameters ``x``, the

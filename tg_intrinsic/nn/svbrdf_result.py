@@ -10,17 +10,31 @@ from torch import Tensor
 from tg_intrinsic.utils import atomic_write
 
 # What each map is, for figures and colour-mapped exports: a title, the
-# colour-bar label (with units) and the colormap of scalar maps.
+# colour-bar label (with units), the colormap of scalar maps and the range
+# that colormaps and 8-bit images span.
 MAP_INFO = {
     'base_color': {'title': 'base colour', 'label': 'linear RGB in [0, 1]',
-                   'cmap': None},
+                   'cmap': None, 'range': (0.0, 1.0)},
     'metallic': {'title': 'metallic', 'label': 'metallic (0 dielectric, '
-                 '1 metal)', 'cmap': 'viridis'},
+                 '1 metal)', 'cmap': 'viridis', 'range': (0.0, 1.0)},
     'roughness': {'title': 'roughness', 'label': 'perceptual roughness r '
-                  '(GGX alpha = r^2)', 'cmap': 'viridis'},
+                  '(GGX alpha = r^2)', 'cmap': 'viridis', 'range': (0.0, 1.0)},
     'entropy': {'title': 'uncertainty', 'label': 'normalised entropy (0 '
-                'certain, 1 unknown)', 'cmap': 'turbo'},
+                'certain, 1 unknown)', 'cmap': 'turbo', 'range': (0.0, 1.0)},
+    'roughness_std': {'title': 'roughness uncertainty', 'label':
+                      'estimated standard deviation of the roughness '
+                      '(0 to 0.1 and above)', 'cmap': 'turbo',
+                      'range': (0.0, 0.1)},
 }
+#: The uncertainty maps, drawn through their colormap in images.
+UNCERTAINTY_MAPS = ('entropy', 'roughness_std')
+
+
+def scaled_to_range(name: str, value: np.ndarray) -> np.ndarray:
+    """``value`` of the map ``name`` scaled from its :data:`MAP_INFO`
+    range to [0, 1] and clipped, as colormaps and 8-bit images take it."""
+    low, high = MAP_INFO[name]['range']
+    return np.clip((value - low) / (high - low), 0.0, 1.0)
 
 
 @dataclass
@@ -32,8 +46,13 @@ class SVBRDFResult:
         base_color (torch.Tensor): :math:`(N, 3)`.
         metallic (torch.Tensor): :math:`(N)`.
         roughness (torch.Tensor): :math:`(N)`.
-        entropy (torch.Tensor): Normalised entropy :math:`(N)` (or
-            :obj:`None`).
+        entropy (torch.Tensor): Normalised entropy :math:`(N)` of the
+            spectrum's likelihood (the paper's uncertainty of the
+            spherical-harmonic recovery), or :obj:`None`.
+        roughness_std (torch.Tensor): Estimated standard deviation of the
+            roughness :math:`(N)` at the fitted parameters (see
+            :meth:`~tg_intrinsic.nn.FrequencySVBRDF.refine`), or
+            :obj:`None`.
         loss (list): Loss per step (the last entry after the final step).
         seconds (float): Wall time of the fit.
         texture_shape (tuple): ``(H, W)`` when the points are texels.
@@ -49,6 +68,7 @@ class SVBRDFResult:
     metallic: Tensor
     roughness: Tensor
     entropy: Optional[Tensor] = None
+    roughness_std: Optional[Tensor] = None
     loss: List[float] = field(default_factory=list)
     seconds: float = 0.0
     texture_shape: Optional[Tuple[int, int]] = None
@@ -62,8 +82,9 @@ class SVBRDFResult:
         point is) comes last."""
         out = {'base_color': self.base_color, 'metallic': self.metallic,
                'roughness': self.roughness}
-        if self.entropy is not None:
-            out['entropy'] = self.entropy
+        for name in UNCERTAINTY_MAPS:
+            if getattr(self, name) is not None:
+                out[name] = getattr(self, name)
         out = {k: v.detach().cpu().numpy() for k, v in out.items()}
         if self.texture_shape is None:
             if self.texel_index is not None:
@@ -97,10 +118,11 @@ class SVBRDFResult:
         r"""Writes ``maps.npz`` and one PNG per map into :obj:`directory`,
         each file atomically: the base colour as RGB, metallic and
         roughness as grey values (so texel maps are usable textures), the
-        entropy through the colormap of :data:`MAP_INFO` (turbo). Texel
-        maps are written as textures; with a :obj:`texel_index` the
-        texels without a point are black (NaN in ``maps.npz``) and
-        ``coverage.png`` is white where a point is. Point maps are drawn as seen by one
+        uncertainty maps (:data:`UNCERTAINTY_MAPS`) through the colormap
+        of :data:`MAP_INFO` (turbo) over its range. Texel maps are written
+        as textures; with a :obj:`texel_index` the texels without a point
+        are black (NaN in ``maps.npz``) and ``coverage.png`` is white
+        where a point is. Point maps are drawn as seen by one
         camera (the first of :obj:`intrinsics` / :obj:`extrinsics`, else
         one above the object looking down :math:`-z`): on the surface
         when :obj:`face` is given (rasterised,
@@ -142,9 +164,10 @@ class SVBRDFResult:
                     value = value[..., 0]
             if value.dtype == bool:  # the coverage mask
                 value = value.astype(np.float64)
-            if name == 'entropy':
+            if name in UNCERTAINTY_MAPS:
                 colormap = matplotlib.colormaps[MAP_INFO[name]['cmap']]
-                image = colormap(np.nan_to_num(value, nan=0.0))[..., :3]
+                image = colormap(scaled_to_range(
+                    name, np.nan_to_num(value, nan=0.0)))[..., :3]
                 image[np.isnan(value)] = 0
             elif value.ndim == 2:
                 image = np.repeat(np.nan_to_num(value)[..., None], 3, -1)
@@ -170,7 +193,9 @@ class SVBRDFResult:
             x_i = x_{s_i}(i) \quad \text{for } x \in \{b, m, r, H\},
 
         the first input winning ties. No ground truth is used: the entropy
-        alone decides.
+        alone decides. After the refinement the entropy (of the
+        spherical-harmonic spectrum) no longer describes the maps:
+        :meth:`merge_by_uncertainty` merges those.
 
         Args:
             results (sequence of SVBRDFResult): At least one, all with the
@@ -184,50 +209,14 @@ class SVBRDFResult:
             minimised) and ``source`` :math:`(N)` (long), the index into
             :obj:`results` each point was taken from.
         """
-        results = list(results) if isinstance(results, (list, tuple)) \
-            else None
-        if not results:
-            raise ValueError("'results' must be a non-empty list or tuple "
-                             "of SVBRDFResult")
-        num = None
-        for k, res in enumerate(results):
-            if not isinstance(res, cls):
-                raise ValueError(f"results[{k}] is a {type(res).__name__}, "
-                                 f"not an SVBRDFResult")
-            if res.entropy is None:
-                raise ValueError(f"results[{k}] has no entropy; run "
-                                 f"SpectralUncertainty before the fit so "
-                                 f"that the merge can compare certainty")
-            if num is None:
-                num = res.roughness.size(0)
-            shapes = {'base_color': (num, 3), 'metallic': (num, ),
-                      'roughness': (num, ), 'entropy': (num, )}
-            for name, shape in shapes.items():
-                if tuple(getattr(res, name).shape) != shape:
-                    raise ValueError(
-                        f"results[{k}].{name} has shape "
-                        f"{list(getattr(res, name).shape)}, expected "
-                        f"{list(shape)}: every result must cover the same "
-                        f"{num} points (results[0] has {num})")
-            if not bool(torch.isfinite(res.entropy).all()):
-                raise ValueError(f"results[{k}].entropy holds NaN or "
-                                 f"infinite values; a point without an "
-                                 f"uncertainty cannot be compared")
-            if res.texture_shape != results[0].texture_shape:
-                raise ValueError(f"results[{k}] has texture_shape "
-                                 f"{res.texture_shape}, results[0] "
-                                 f"{results[0].texture_shape}")
-        device = results[0].entropy.device
-        entropy = torch.stack([r.entropy.detach().to(device)
-                               for r in results])  # (R, N)
+        results, entropy = cls._stack_for_merge(results, 'entropy')
         # argmin returns the first minimum: ties go to the earlier input
         source = entropy.argmin(0)
-        points = torch.arange(num, device=device)
+        points = torch.arange(source.numel(), device=source.device)
 
         def pick(name):
-            maps = torch.stack([getattr(r, name).detach().to(device)
-                                for r in results])
-            return maps[source, points]
+            return torch.stack([getattr(r, name).detach().to(source.device)
+                                for r in results])[source, points]
 
         merged = cls(base_color=pick('base_color'),
                      metallic=pick('metallic'), roughness=pick('roughness'),
@@ -235,6 +224,105 @@ class SVBRDFResult:
                      seconds=sum(r.seconds for r in results),
                      texture_shape=results[0].texture_shape)
         return merged, source
+
+    @classmethod
+    def merge_by_uncertainty(cls, results: List['SVBRDFResult']
+                             ) -> Tuple['SVBRDFResult', Tensor]:
+        r"""Merges recoveries of the same points (e.g. the same object
+        under several lightings) by weighting every recovery at every
+        point by the inverse variance of its roughness,
+
+        .. math::
+            w_k(i) = \frac{s_k(i)^{-2}}{\sum_l s_l(i)^{-2}}, \qquad
+            x_i = \sum_k w_k(i)\, x_k(i) \quad \text{for }
+            x \in \{b, m, r\}, \qquad
+            s_i = \Big(\sum_k s_k(i)^{-2}\Big)^{-1/2},
+
+        with :math:`s` the :obj:`roughness_std` of
+        :meth:`~tg_intrinsic.nn.FrequencySVBRDF.refine` (or
+        :meth:`~tg_intrinsic.nn.FrequencySVBRDF.fit`). The roughness's
+        uncertainty weights all maps: a point's base colour and metallic
+        are as reliable as the lobe that the light reveals (on
+        ``benchmarks/svbrdf_merge.py``, weights from the base colour's own
+        variance merged its colour worse than plain averaging). No ground
+        truth is used.
+
+        Args:
+            results (sequence of SVBRDFResult): At least one, all with the
+                same number of points (and texture shape) and a finite,
+                positive :obj:`roughness_std`.
+
+        Returns:
+            ``(merged, weight)``: the merged :class:`SVBRDFResult` (its
+            :obj:`roughness_std` as above, :obj:`entropy` :obj:`None`,
+            :obj:`seconds` the sum of the inputs', :obj:`loss` empty) and
+            the weights :math:`(K, N)`, which sum to one at every point.
+        """
+        results, std = cls._stack_for_merge(results, 'roughness_std')
+        if bool((std <= 0).any()):
+            raise ValueError("a 'roughness_std' is zero or negative; an "
+                             "uncertainty must be positive to weight a "
+                             "recovery")
+        precision = std.double() ** -2
+        weight = precision / precision.sum(0)
+
+        def average(name):
+            maps = torch.stack([getattr(r, name).detach().to(std.device)
+                                for r in results])
+            return (weight.view(weight.shape + (1, ) * (maps.dim() - 2))
+                    * maps.double()).sum(0).to(maps.dtype)
+
+        merged = cls(base_color=average('base_color'),
+                     metallic=average('metallic'),
+                     roughness=average('roughness'),
+                     roughness_std=precision.sum(0).rsqrt().to(std.dtype),
+                     seconds=sum(r.seconds for r in results),
+                     texture_shape=results[0].texture_shape)
+        return merged, weight.to(std.dtype)
+
+    @classmethod
+    def _stack_for_merge(cls, results, key: str):
+        """Checks that ``results`` are results of the same points, each
+        with a finite ``key`` map; returns them as a list and that map
+        stacked :math:`(K, N)` on the first one's device."""
+        results = list(results) if isinstance(results, (list, tuple)) \
+            else None
+        if not results:
+            raise ValueError("'results' must be a non-empty list or tuple "
+                             "of SVBRDFResult")
+        how = {'entropy': "run SpectralUncertainty before the fit",
+               'roughness_std': "FrequencySVBRDF.fit, refine and recover "
+                                "set it"}[key]
+        num = None
+        for k, res in enumerate(results):
+            if not isinstance(res, cls):
+                raise ValueError(f"results[{k}] is a {type(res).__name__}, "
+                                 f"not an SVBRDFResult")
+            if getattr(res, key) is None:
+                raise ValueError(f"results[{k}] has no {key}; {how} so "
+                                 f"that the merge can compare certainty")
+            if num is None:
+                num = res.roughness.size(0)
+            shapes = {'base_color': (num, 3), 'metallic': (num, ),
+                      'roughness': (num, ), key: (num, )}
+            for name, shape in shapes.items():
+                if tuple(getattr(res, name).shape) != shape:
+                    raise ValueError(
+                        f"results[{k}].{name} has shape "
+                        f"{list(getattr(res, name).shape)}, expected "
+                        f"{list(shape)}: every result must cover the same "
+                        f"{num} points (results[0] has {num})")
+            if not bool(torch.isfinite(getattr(res, key)).all()):
+                raise ValueError(f"results[{k}].{key} holds NaN or "
+                                 f"infinite values; a point without an "
+                                 f"uncertainty cannot be compared")
+            if res.texture_shape != results[0].texture_shape:
+                raise ValueError(f"results[{k}] has texture_shape "
+                                 f"{res.texture_shape}, results[0] "
+                                 f"{results[0].texture_shape}")
+        device = getattr(results[0], key).device
+        return results, torch.stack([getattr(r, key).detach().to(device)
+                                     for r in results])
 
 
 def _texel_positions(texel_index, texture_shape, num_points) -> np.ndarray:

@@ -1145,14 +1145,11 @@ def rank_correlation(x: Sequence[float], y: Sequence[float]) -> float:
 def svbrdf_merge(d, _):
     runs = d['runs']
     maps = [r['envmap'] for r in runs[0]['rows']]
-    per_point = [r['mean_per_point_spearman_across_lightings'] for r in runs]
 
-    def pair(m):
-        return f"{m['roughness_mae']:.3f} / {m['base_color_rmse']:.3f}"
-
-    def spans(key):
-        return (span([r[key]['roughness_mae'] for r in runs], f3) + ' / '
-                + span([r[key]['base_color_rmse'] for r in runs], f3))
+    def spans(merge):
+        return (span([r['merges'][merge]['roughness_mae'] for r in runs], f3)
+                + ' / ' + span([r['merges'][merge]['base_color_rmse']
+                                for r in runs], f3))
 
     def single(which):
         return (span([r['single']['roughness_mae'][which] for r in runs],
@@ -1160,46 +1157,39 @@ def svbrdf_merge(d, _):
                 + span([r['single']['base_color_rmse'][which] for r in runs],
                        f3))
 
-    met = d['goal_met_in']
-    beats = sum(g['beats_mean'] for r in runs for g in r['goal'].values())
-    within = sum(g['within_10pct_of_best'] for r in runs
-                 for g in r['goal'].values())
-    across = [rank_correlation([m['mean_entropy'] for m in r['rows']],
-                               [m['roughness_mae'] for m in r['rows']])
-              for r in runs]
-    share = {m: sum(r['merged']['share_per_envmap'][m] for r in runs)
-             / len(runs) for m in maps}
-    most = max(share, key=share.get)
-    best_maps = sorted({r['single']['roughness_mae']['best_envmap']
-                        for r in runs})
-    rho = [m['spearman_entropy_roughness_error'] for r in runs
-           for m in r['rows']]
+    def across(key):
+        return span([r['mean_per_point_spearman_across_lightings'][key]
+                     for r in runs], signed, ' to ')
+
+    def within(key):
+        return span([m[f'spearman_{key}_roughness_error'] for r in runs
+                     for m in r['rows']], signed, ' to ')
+
+    issue17 = d['issue17_goal_met_in']
     result = (
         f"{d['scene']}, {d['views']} views, {len(runs)} seeds, each under "
         f"{len(maps)} lightings ({', '.join(f'`{m}`' for m in maps)}), "
-        f"recovered on its own (LM); roughness MAE / base RMSE over the "
-        f"seeds: entropy merge {spans('merged')}, single lights mean "
-        f"{single('mean')}, best {single('best')}; averaging the maps "
-        f"without entropy {spans('average_of_maps')}, per-point oracle "
-        f"(ground truth) {spans('oracle_per_point')}. **The issue's goal "
-        f"(beat the single-light mean and stay within "
-        f"{pct(d['tolerance'])} of the best, both metrics) is met in "
-        f"{met} of {len(runs)} seeds** ({beats} of {2 * len(runs)} "
-        f"metric/seed pairs beat the mean, {within} are within "
-        f"{pct(d['tolerance'])} of the best). Why: per point, entropy "
-        f"across lightings does not rank the errors (mean Spearman "
-        f"{span(per_point, signed, ' to ')}); "
-        f"the merge picks the lowest-error lighting at "
-        f"{span_pct([r['merged_picks_lowest_error_lighting'] for r in runs])}"
-        f" of points (chance {pct(1 / len(maps))}), most often `{most}` "
-        f"({pct(share[most])}), while the best single light is "
-        f"{', '.join(f'`{m}`' for m in best_maps)}; across lightings, mean "
-        f"entropy against roughness MAE has Spearman "
-        f"{span(across, signed, ' to ')} (sharp lights give confident "
-        f"spectra whatever the model error); within one lighting, entropy "
-        f"vs. per-point roughness error {span(rho, signed, ' to ')}")
-    return [('entropy-based merging of recoveries under several lightings '
-             '(paper Table 5.6)', 'svbrdf_merge.py', result)]
+        f"recovered on its own by the default (`recover`, refined); "
+        f"roughness MAE / base RMSE over the seeds: **merge by uncertainty "
+        f"(inverse-variance weights from `roughness_std`) "
+        f"{spans('uncertainty')}**, averaging the maps "
+        f"{spans('average_of_maps')}, the paper's entropy merge "
+        f"{spans('entropy')}; single lights mean {single('mean')}, best "
+        f"{single('best')}; per-point oracle (ground truth) "
+        f"{spans('oracle_per_point')}. **The merge by uncertainty beats "
+        f"averaging in both metrics in {d['uncertainty_beats_average_in']} "
+        f"of {len(runs)} seeds** (issue 32); issue 17's goal (beat the "
+        f"single-light mean, within {pct(d['tolerance'])} of the best, both "
+        f"metrics) is met by it in {issue17['uncertainty']} of {len(runs)} "
+        f"seeds, by the entropy merge in {issue17['entropy']}. Per point, "
+        f"across lightings, Spearman of the uncertainty against the "
+        f"roughness error: `roughness_std` {across('roughness_std')}, "
+        f"entropy {across('entropy')} (after the refinement the entropy of "
+        f"the spherical-harmonic spectrum no longer describes the maps); "
+        f"per lighting, across points: `roughness_std` "
+        f"{within('roughness_std')}, entropy {within('entropy')}")
+    return [('merging recoveries under several lightings (paper Table '
+             '5.6)', 'svbrdf_merge.py', result)]
 
 
 @rows_for('svbrdf_views')

@@ -1083,7 +1083,7 @@ def svbrdf_mitsuba(d, _):
              for r in rows]
     if all(rank is not None for rank in ranks):
         result += (f" The default's `roughness_std` ranks its per-point "
-                   f"roughness error at Spearman {span(ranks, signed)}.")
+                   f"roughness error at Spearman {span(ranks, signed, ' to ')}.")
     out.append(("SVBRDF: the command's default (full-integral refinement) "
                 "vs. `prb` alone, time to prb's best error",
                 'svbrdf_mitsuba.py', result))

@@ -72,6 +72,17 @@ def errors(data, base_color, roughness):
                    ).mean().sqrt()))
 
 
+def rank_uncertainty(data, result) -> float:
+    """Spearman of the result's ``roughness_std`` against its per-point
+    roughness error, over the points some view sees."""
+    from scipy.stats import spearmanr
+    seen = data.obs_mask.any(1)
+    error = (result.roughness.detach().double()
+             - data.roughness.double()).abs()
+    return float(spearmanr(result.roughness_std[seen].numpy(),
+                           error[seen].numpy()).statistic)
+
+
 DEFAULT = 'default (recover: full-integral refinement, metallic free)'
 # label: (l*, specular model, solver, metallic held, full-integral refinement)
 OURS = {'mixed (eq. 5.11, l* = 5), Adam': (5, 'eq5.11', 'adam', None, False),
@@ -303,7 +314,9 @@ def main():
                                   'base_color_rmse': base,
                                   'metallic_mae': float(
                                       (result.metallic.detach()
-                                       - data.metallic).abs().mean())}
+                                       - data.metallic).abs().mean()),
+                                  'spearman_roughness_std_roughness_error':
+                                      rank_uncertainty(data, result)}
             if result.pipeline is not None and 'steps' in result.pipeline:
                 # recover(): its steps, the refinement's parts
                 row['ours'][label]['stage_seconds'] = dict(

@@ -8,7 +8,7 @@ TORCH_INSTALL ?= pip install torch==2.13.0
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test train benchmarks clean gravomg-env
+.PHONY: install demo test docs train benchmarks clean gravomg-env
 
 $(STAMP): setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -21,6 +21,12 @@ install: $(STAMP)
 
 demo: $(STAMP)
 	$(BIN)/tg-intrinsic demo
+
+# The documentation site, offline, warnings as errors; the examples run
+# with --quick for the gallery's figures.
+docs: $(STAMP)
+	$(BIN)/pip install -q -e ".[docs]"
+	$(BIN)/python -m sphinx -W --keep-going -b html docs docs/_build/html
 
 train: $(STAMP)
 	$(BIN)/tg-intrinsic train $(ARGS)
@@ -43,4 +49,4 @@ gravomg-env:
 	.gravomg-env/bin/pip install "numpy==1.26.4" "scipy<1.14" "gravomg==0.0.4"
 
 clean:
-	rm -rf $(VENV) build *.egg-info data
+	rm -rf $(VENV) build *.egg-info data docs/_build docs/api/pages docs/auto_examples

@@ -1,4 +1,11 @@
+import re
+
 from setuptools import find_packages, setup
+
+# the version is defined once, in tg_intrinsic/__init__.py (read, not
+# imported: importing needs torch, which the build must not)
+with open('tg_intrinsic/__init__.py', encoding='utf-8') as f:
+    VERSION = re.search(r"^__version__ = '([^']+)'$", f.read(), re.M).group(1)
 
 # torch is listed without a pin so that users keep the build (CPU or CUDA) they
 # installed first; the Makefile installs the CPU build torch==2.13.0 before this.
@@ -32,7 +39,17 @@ extras_require = {
         # svbrdf --texture: a UV atlas, and a glTF reader that is not ours
         'xatlas>=0.0.9',
         'pygltflib>=1.16',
+        # the wheel as users get it (tests/test_packaging.py; built without
+        # isolation, so with this environment's setuptools)
+        'build>=1.0',
+        'setuptools>=70.1',
+        'twine>=5.0',
+        # docstrings of constants (tests/test_docs.py)
+        'sphinx>=7.0',
     ],
+    # The documentation site: make docs.
+    'docs': ['sphinx>=7.0', 'furo>=2024.1', 'myst-parser>=3.0',
+             'sphinx-gallery>=0.17'],
     # log_map(method='vector_heat'): geometry-central's vector heat method.
     'heat': ['potpourri3d>=1.0'],
     # Optional compiled scatter kernels; results must not change with it.
@@ -54,7 +71,7 @@ extras_require = {
 
 setup(
     name='tg_intrinsic',
-    version='0.1.0',
+    version=VERSION,
     description=('PyTorch Geometric extension for learning and computing on '
                  'curved surfaces with intrinsic geometry'),
     long_description=open('README.md', encoding='utf-8').read(),

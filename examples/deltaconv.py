@@ -1,4 +1,8 @@
-"""DeltaConv in under a minute (Wiersma et al., "DeltaConv: anisotropic
+"""
+DeltaConv: surface operators and a DeltaNet
+===========================================
+
+DeltaConv in under a minute (Wiersma et al., "DeltaConv: anisotropic
 operators for geometric deep learning on point clouds", SIGGRAPH 2022).
 
 1. The operators: gradient and divergence of a point cloud by moving least
@@ -16,7 +20,8 @@ operators for geometric deep learning on point clouds", SIGGRAPH 2022).
 3 instead of 10 training shapes per class, 128 instead of 256 points,
 for 2 instead of 8 epochs, and uses 2000 instead of 8000 sphere points.
 Everything is written under ``--out`` (default ``runs/examples/deltaconv``):
-the generated data set cache and ``results.json``.
+the generated data set cache, ``figure.png`` (the training loss per epoch
+and the test accuracy) and ``results.json``.
 """
 import argparse
 import json
@@ -39,7 +44,8 @@ CLASSES = ('airplane', 'bottle', 'chair', 'guitar', 'lamp', 'table')
 
 
 def parse_args():
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(description=__doc__.strip().split(
+        '\n')[0])
     parser.add_argument('--out', default=os.path.join('runs', 'examples',
                                                       'deltaconv'))
     parser.add_argument('--quick', action='store_true',
@@ -131,6 +137,7 @@ def train_deltanet(root, quick, epochs, seed):
     print(f"DeltaNet ({parameters / 1e3:.0f}k parameters): "
           f"{len(train_set)} training / {len(test_set)} test clouds of "
           f"{num_points} points, classes {', '.join(names)}")
+    losses = []
     for epoch in range(1, epochs + 1):
         model.train()
         total = 0.0
@@ -147,7 +154,8 @@ def train_deltanet(root, quick, epochs, seed):
             optimizer.step()
             total += float(loss.detach()) * batch.y.numel()
         schedule.step()
-        print(f"  epoch {epoch}: train loss {total / len(train_set):.3f}")
+        losses.append(total / len(train_set))
+        print(f"  epoch {epoch}: train loss {losses[-1]:.3f}")
     running = accuracy(model, test_loader)
     # The running statistics of a few dozen steps lag behind the weights
     # (evaluation can sit at chance level): recompute them under the
@@ -164,7 +172,24 @@ def train_deltanet(root, quick, epochs, seed):
             'test_shapes': len(test_set), 'num_points': num_points,
             'epochs': epochs, 'parameters': parameters,
             'test_accuracy': test,
-            'test_accuracy_training_statistics': running, 'chance': chance}
+            'test_accuracy_training_statistics': running, 'chance': chance,
+            'train_loss': losses}
+
+
+def figure(result, path):
+    """The training loss per epoch, and the test accuracy against chance."""
+    import matplotlib.pyplot as plt
+    fig, (left, right) = plt.subplots(1, 2, figsize=(9, 3.5))
+    epochs = range(1, len(result['train_loss']) + 1)
+    left.plot(epochs, result['train_loss'], 'o-')
+    left.set(xlabel='epoch', ylabel='training loss (cross entropy)',
+             title='DeltaNet training')
+    right.bar(['test accuracy', 'chance'],
+              [result['test_accuracy'], result['chance']], color=['C0', '0.7'])
+    right.set(ylim=(0, 1), title=f"{len(result['classes'])} classes")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    return fig
 
 
 def main():
@@ -178,6 +203,7 @@ def main():
         os.path.join(args.out, 'SyntheticModelNet'), args.quick, epochs,
         args.seed)
     results['seconds'] = time.perf_counter() - start
+    figure(results['deltanet'], os.path.join(args.out, 'figure.png'))
     with open(os.path.join(args.out, 'results.json'), 'w') as f:
         json.dump(results, f, indent=2)
     print(f"done in {results['seconds']:.1f} s; wrote "

@@ -1,4 +1,8 @@
-"""Gravo MG in under a minute (Wiersma et al., "A fast geometric multigrid
+"""
+Gravo MG: multigrid solves on a curved surface
+==============================================
+
+Gravo MG in under a minute (Wiersma et al., "A fast geometric multigrid
 method for curved surfaces", SIGGRAPH 2023).
 
 On a generated bumpy sphere (a subdivided icosphere, 41k vertices by
@@ -12,7 +16,7 @@ on the same matrix:
 
 with S the cotan Laplacian and M the lumped mass matrix
 (``stiffness_and_mass``). It prints the hierarchy, the V-cycles, the
-relative residual |b - A x| / |b|, the relative difference to the direct
+relative residual ``|b - A x| / |b|``, the relative difference to the direct
 solution and the times. A last part uses the solver directly
 (``GravoMG.solve``) at the default tolerance 1e-4.
 
@@ -21,7 +25,7 @@ solution and the times. A last part uses the solver directly
 ``--subdivisions 7`` gives 164k vertices (spsolve then takes ~10 s).
 ``--quick`` (used by the smoke test) uses 5 subdivisions (10k vertices)
 instead of 6. ``--out`` (default ``runs/examples/gravo_mg``) receives
-``results.json``.
+``figure.png`` (the relative residual per V-cycle) and ``results.json``.
 """
 import argparse
 import json
@@ -40,7 +44,8 @@ from tg_intrinsic.transforms import GravoHierarchy, NormalizeArea
 
 
 def parse_args():
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(description=__doc__.strip().split(
+        '\n')[0])
     parser.add_argument('--out', default=os.path.join('runs', 'examples',
                                                       'gravo_mg'))
     parser.add_argument('--quick', action='store_true',
@@ -81,6 +86,18 @@ def compare(name, solve, matrix, mass, y, solver):
     return {'cycles': info.iterations, 'residual': residual,
             'relative_difference': difference, 'ours_s': ours_s,
             'spsolve_s': direct_s}
+
+
+def figure(residuals, path):
+    """The relative residual after every V-cycle of ``GravoMG.solve``."""
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(5, 3.5))
+    ax.semilogy(range(len(residuals)), residuals, 'o-')
+    ax.set(xlabel='V-cycle', ylabel='relative residual |b - A x| / |b|',
+           title='Gravo MG on S + 1e-6 M')
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    return fig
 
 
 def main():
@@ -147,6 +164,7 @@ def main():
                              'setup_s': first.setup_time,
                              'cycles_s': first.solve_time,
                              'cached_cycles_s': cached.solve_time}
+    figure(first.residuals, os.path.join(args.out, 'figure.png'))
     with open(os.path.join(args.out, 'results.json'), 'w') as f:
         json.dump(results, f, indent=2)
     print(f"wrote {os.path.join(args.out, 'results.json')}")

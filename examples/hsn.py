@@ -1,4 +1,8 @@
-"""Harmonic Surface Networks in under a minute (Wiersma et al., "CNNs on
+"""
+Harmonic Surface Networks: precomputation, training, gauge equivariance
+=======================================================================
+
+Harmonic Surface Networks in under a minute (Wiersma et al., "CNNs on
 surfaces using rotation-equivariant features", SIGGRAPH 2020).
 
 1. The precomputation on small SyntheticSHREC meshes (generated here, no
@@ -19,8 +23,9 @@ surfaces using rotation-equivariant features", SIGGRAPH 2020).
 
 ``--quick`` (used by the smoke test) uses 3 instead of 4 classes, 2 instead
 of 6 training shapes per class and 1 instead of 10 epochs. ``--out``
-(default ``runs/examples/hsn``) receives the generated data set cache and
-``results.json``.
+(default ``runs/examples/hsn``) receives the generated data set cache,
+``figure.png`` (the training loss per epoch, and the logits of a mesh with
+its frames as given and turned) and ``results.json``.
 """
 import argparse
 import json
@@ -45,7 +50,8 @@ CLASSES = ('ant', 'hand', 'snake', 'vase')
 
 
 def parse_args():
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(description=__doc__.strip().split(
+        '\n')[0])
     parser.add_argument('--out', default=os.path.join('runs', 'examples',
                                                       'hsn'))
     parser.add_argument('--quick', action='store_true',
@@ -106,6 +112,23 @@ def turn_frames(frame, angle):
                         -s * frame[:, 0] + c * frame[:, 1], frame[:, 2]], 1)
 
 
+def figure(losses, logits, logits_turned, path):
+    """The training loss per epoch, and one mesh's logits with its frames
+    as given against turned by random angles (the same: equivariance)."""
+    import matplotlib.pyplot as plt
+    fig, (left, right) = plt.subplots(1, 2, figsize=(9, 3.5))
+    left.plot(range(1, len(losses) + 1), losses, 'o-')
+    left.set(xlabel='epoch', ylabel='training loss (cross entropy)',
+             title='HSN training')
+    right.scatter(logits.flatten().numpy(), logits_turned.flatten().numpy())
+    right.set(xlabel='logits, frames as given',
+              ylabel='logits, frames turned at random',
+              title='gauge equivariance')
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    return fig
+
+
 def main():
     args = parse_args()
     epochs = args.epochs or (1 if args.quick else 15)
@@ -131,6 +154,7 @@ def main():
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, epochs)
     rotate = RandomRotation()        # any rotation in SO(3), frames too
     generator = torch.Generator().manual_seed(args.seed)
+    losses = []
     for epoch in range(1, epochs + 1):
         model.train()
         total = 0.0
@@ -144,7 +168,8 @@ def main():
             optimizer.step()
             total += float(loss.detach()) * batch.y.numel()
         schedule.step()
-        print(f"  epoch {epoch}: train loss {total / len(train_items):.3f}")
+        losses.append(total / len(train_items))
+        print(f"  epoch {epoch}: train loss {losses[-1]:.3f}")
     # HSN normalises every mesh by its own statistics (ComplexInstanceNorm),
     # so evaluation mode computes what training did: nothing to recalibrate
     test = accuracy(model, test_items)
@@ -170,6 +195,7 @@ def main():
           f"log-map angles by up to {theta_change:.2f} rad; max relative "
           f"change of the logits {gauge:.1e}")
 
+    figure(losses, out, out_turned, os.path.join(args.out, 'figure.png'))
     results = {'classes': list(names), 'train_shapes': len(train_items),
                'test_shapes': len(test_items), 'epochs': epochs,
                'test_accuracy': test,

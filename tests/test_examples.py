@@ -21,7 +21,7 @@ KEY_LINES = {
                     r'difference to spsolve \d\.\de-\d+',
                     r'screened Poisson .* relative residual \d\.\de-\d+'),
     'svbrdf.py': (r'SVBRDF: roughness MAE \d\.\d{3}, base-colour RMSE '
-                  r'\d\.\d{3}, Spearman\(entropy, roughness error\) '
+                  r'\d\.\d{3}, Spearman\(roughness_std, roughness error\) '
                   r'[-+]\d\.\d\d',),
 }
 

@@ -1,26 +1,34 @@
-"""The README's examples run as written: every Python block, in order, in
-one namespace (its placeholder folder swapped for generated meshes), and
-every `tg-intrinsic` command line of its shell blocks parses."""
+"""The README's and the documentation pages' examples run as written: every
+Python block of a page, in order, in one namespace per page (placeholder
+folders swapped for generated meshes), and every `tg-intrinsic` command
+line of their shell blocks parses."""
+import glob
 import os
 import re
 import shlex
 
 import pytest
 
-README = os.path.join(os.path.dirname(__file__), '..', 'README.md')
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..')
+README = os.path.join(ROOT, 'README.md')
+# the pages whose Python blocks run, in the site's order
+PAGES = [README] + [os.path.join(ROOT, 'docs', page) for page in (
+    'getting_started.md', 'methods/deltaconv.md', 'methods/hsn.md',
+    'methods/gravo_mg.md', 'methods/svbrdf.md')]
 
 
-def blocks(language):
-    text = open(README, encoding='utf-8').read()
+def blocks(path, language):
+    text = open(path, encoding='utf-8').read()
     return re.findall(rf'```{language}\n(.*?)```', text, flags=re.S)
 
 
 def command_lines():
-    for block in blocks('bash'):
-        for line in block.replace('\\\n', ' ').split('\n'):
-            line = line.split('#', 1)[0].strip()
-            if line.startswith('tg-intrinsic '):
-                yield line
+    for path in PAGES + glob.glob(os.path.join(ROOT, 'docs', '*.md')):
+        for block in blocks(path, 'bash'):
+            for line in block.replace('\\\n', ' ').split('\n'):
+                line = line.split('#', 1)[0].strip()
+                if line.startswith('tg-intrinsic '):
+                    yield line
 
 
 def make_mesh_folder(root):
@@ -33,13 +41,18 @@ def make_mesh_folder(root):
         mesh.export(folder / f'{name}.off')
 
 
-def test_the_readme_has_what_this_test_reads():
-    assert len(blocks('python')) >= 5
+def test_the_pages_have_what_this_test_reads():
+    assert all(blocks(page, 'python') for page in PAGES)
+    # every page with Python in it is run
+    for path in glob.glob(os.path.join(ROOT, 'docs', '**', '*.md'),
+                          recursive=True):
+        if blocks(path, 'python'):
+            assert os.path.abspath(path) in map(os.path.abspath, PAGES)
     commands = {line.split()[1] for line in command_lines()}
     assert {'info', 'solve', 'precompute', 'svbrdf', 'train'} <= commands
 
 
-def test_every_command_line_of_the_readme_parses():
+def test_every_command_line_parses():
     from tg_intrinsic.cli import build_parser
     parser = build_parser()
     for line in command_lines():
@@ -47,20 +60,40 @@ def test_every_command_line_of_the_readme_parses():
         assert args.command == line.split()[1]
 
 
-def test_the_python_blocks_run_in_order(tmp_path, monkeypatch):
-    make_mesh_folder(tmp_path / 'meshes')
-    monkeypatch.chdir(tmp_path)
-    namespace = {'__name__': '__readme__'}
-    for index, code in enumerate(blocks('python')):
+def run_blocks(path, tmp_path):
+    """Runs the Python blocks of ``path`` in order; returns the namespace."""
+    namespace = {'__name__': '__page__'}
+    name = os.path.relpath(path, ROOT)
+    for index, code in enumerate(blocks(path, 'python')):
         code = code.replace('path/to/ModelNet10', str(tmp_path / 'meshes'))
         try:
-            exec(compile(code, f'README.md python block {index + 1}',
-                         'exec'), namespace)
+            exec(compile(code, f'{name} python block {index + 1}', 'exec'),
+                 namespace)
         except Exception as error:  # noqa: BLE001 - named in the failure
-            pytest.fail(f'README python block {index + 1} failed: '
+            pytest.fail(f'{name} python block {index + 1} failed: '
                         f'{type(error).__name__}: {error}')
+    return namespace
+
+
+@pytest.mark.parametrize('page', PAGES,
+                         ids=[os.path.relpath(p, ROOT) for p in PAGES])
+def test_the_python_blocks_run_in_order(page, tmp_path, monkeypatch):
+    make_mesh_folder(tmp_path / 'meshes')
+    monkeypatch.chdir(tmp_path)
+    namespace = run_blocks(page, tmp_path)
     # what the blocks promise to leave behind
-    assert (tmp_path / 'runs' / 'svbrdf' / 'maps.npz').exists()
-    assert tuple(namespace['X'].shape) == (namespace['n'], 16)
-    assert namespace['fine'].shape == namespace['surface'].pos.shape
-    assert namespace['logits'].shape[-1] == namespace['meshes'].num_classes
+    promises = {
+        'README.md': lambda: namespace['logits'].shape[-1]
+        == namespace['clouds'].num_classes,
+        'methods/svbrdf.md': lambda: (tmp_path / 'runs' / 'svbrdf'
+                                      / 'maps.npz').exists(),
+        'methods/gravo_mg.md': lambda: tuple(namespace['X'].shape) == (
+            namespace['n'], 16) and namespace['fine'].shape
+        == namespace['surface'].pos.shape,
+        'methods/hsn.md': lambda: namespace['logits'].shape[-1]
+        == namespace['meshes'].num_classes,
+    }
+    key = os.path.relpath(page, os.path.join(ROOT, 'docs'))
+    key = 'README.md' if page == README else key
+    if key in promises:
+        assert promises[key]()

@@ -12,6 +12,10 @@ from typing import Optional
 
 import torch
 
+__all__ = [
+    'resolve_device', 'check_device', 'local_rank', 'default_threads',
+]
+
 ACCEPTED = "auto, cpu, cuda, cuda:N (N a GPU's index) or mps"
 
 

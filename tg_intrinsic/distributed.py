@@ -25,6 +25,15 @@ import torch
 
 from tg_intrinsic.devices import resolve_device
 
+__all__ = [
+    'start', 'stop', 'rank', 'world_size', 'torchrun_environment',
+    'launched_world_size', 'all_reduce_sum', 'broadcast_object',
+    'broadcast_buffers', 'rank_zero_first', 'derived_seed',
+    'global_batches', 'shard', 'epoch_batches', 'BACKENDS',
+]
+
+#: The process-group backends of :func:`start` ('auto': nccl on CUDA, else
+#: gloo).
 BACKENDS = ('auto', 'gloo', 'nccl')
 
 

@@ -12,6 +12,10 @@ listed in ``benchmarks/replicate/PROTOCOLS.md``.
 from dataclasses import asdict, dataclass, field, replace
 from typing import Dict, Optional, Tuple
 
+__all__ = [
+    'Protocol', 'get_protocol', 'PROTOCOLS', 'DEFAULT_PROTOCOL',
+]
+
 
 @dataclass(frozen=True)
 class Protocol:
@@ -90,6 +94,7 @@ _HSN = Protocol(
            'HSN does not state how many random splits it averages; 10 '
            'seeded splits as for DeltaNet'))
 
+#: Every protocol, by name.
 PROTOCOLS: Dict[str, Protocol] = {p.name: p for p in (
     _DELTANET,
     replace(_DELTANET, name='deltanet-scanobjectnn',
@@ -128,6 +133,8 @@ PROTOCOLS: Dict[str, Protocol] = {p.name: p for p in (
             train_per_class=None, repeats=1),
 )}
 
+#: The protocol ``tg-intrinsic train`` takes for (model, task) without
+#: ``--protocol``.
 DEFAULT_PROTOCOL = {('deltanet', 'classification'): 'deltanet-modelnet40',
                     ('deltanet', 'segmentation'): 'deltanet-shapenet-part',
                     ('hsn', 'classification'): 'hsn-shrec11',

@@ -72,9 +72,9 @@ def resolve_normals(data: Data, k: int = 10) -> Tensor:
 
 def resolve_frames(data: Data, k: int = 10) -> Tensor:
     """The tangent frames of ``data`` by the order above:
-    ``data.frame`` as given, else :func:`~tg_intrinsic.geometry.
-    tangent_frames` of :func:`resolve_normals`, in the dtype of
-    ``data.pos``."""
+    ``data.frame`` as given, else
+    :func:`~tg_intrinsic.geometry.tangent_frames` of
+    :func:`resolve_normals`, in the dtype of ``data.pos``."""
     frame = getattr(data, 'frame', None)
     if frame is not None:
         pos = _positions(data)

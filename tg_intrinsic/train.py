@@ -124,6 +124,12 @@ from tg_intrinsic.protocols import DEFAULT_PROTOCOL, PROTOCOLS, get_protocol
 from tg_intrinsic.utils import (atomic_torch_save, atomic_write,
                                 atomic_write_json, remove_temporaries)
 
+__all__ = [
+    'train', 'evaluate', 'build_model', 'read_checkpoint',
+    'resolve_protocol', 'hsn_pipeline', 'instance_miou',
+    'seed_everything', 'add_arguments', 'parse_args', 'main',
+]
+
 DATASETS = ('synthetic_modelnet', 'synthetic_shrec', 'mesh_folder',
             'synthetic_parts')
 MODELS = ('deltanet', 'hsn')
@@ -1422,6 +1428,8 @@ def check_arguments(args, parser):
 
 
 def parse_args(argv=None):
+    """The options of ``python -m tg_intrinsic.train`` (:func:`add_arguments`)
+    parsed from ``argv`` (default: the command line)."""
     parser = argparse.ArgumentParser(
         description='Train DeltaNet or a Harmonic Surface Network.')
     add_arguments(parser)
@@ -1429,6 +1437,8 @@ def parse_args(argv=None):
 
 
 def main(argv=None):
+    """``python -m tg_intrinsic.train``: :func:`train` with the options of
+    :func:`parse_args`; returns its metrics."""
     return train(parse_args(argv))
 
 

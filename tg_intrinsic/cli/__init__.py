@@ -32,6 +32,9 @@ def build_parser() -> ArgumentParser:
         'recovery.',
         epilog='Run "tg-intrinsic COMMAND --help" for the options and a '
         'worked example of each command.')
+    from tg_intrinsic import __version__
+    parser.add_argument('--version', action='version',
+                        version=f'tg-intrinsic {__version__}')
     sub = parser.add_subparsers(dest='command', metavar='COMMAND',
                                 parser_class=ArgumentParser)
     for name in COMMANDS:

@@ -103,14 +103,17 @@ TEXTURE_FILES = {'base_color': 'base_color_texture.png',
                  'roughness': 'roughness_texture.png',
                  'entropy': 'entropy_texture.png',
                  'roughness_std': 'roughness_std_texture.png'}
+#: The glTF binary of :func:`write_textured_model`.
 GLB_FILE = 'svbrdf.glb'
 
 
 def write_textured_model(folder: str, pos, face, maps: dict, size: int,
                          face_uv=None, normal=None) -> dict:
-    r"""Per-vertex material maps as :math:`N \times N` textures on the
-    mesh's UVs (:func:`~tg_intrinsic.geometry.uv_atlas` makes an atlas
-    when there are none) and a textured glTF binary: the files of
+    r"""Writes per-vertex material maps as textures and a glTF binary.
+
+    The maps become :math:`N \times N` textures on the mesh's UVs
+    (:func:`~tg_intrinsic.geometry.uv_atlas` makes an atlas when there are
+    none), written with a textured glTF binary: the files of
     :data:`TEXTURE_FILES` (base colour sRGB-encoded; the other maps as
     linear grey values over their range in
     :data:`~tg_intrinsic.nn.svbrdf_result.MAP_INFO`: [0, 1], and [0, 0.1]
@@ -132,8 +135,9 @@ def write_textured_model(folder: str, pos, face, maps: dict, size: int,
             (default: :obj:`None`)
 
     Returns:
-        ``{'files': [...], 'uv': 'mesh' or 'xatlas', 'size': N,
-        'coverage': fraction of texels a triangle covers}``.
+        dict: ``files`` (the written paths), ``uv`` (``'mesh'`` or
+        ``'xatlas'``), ``size`` (:math:`N`) and ``coverage`` (the fraction
+        of texels a triangle covers).
     """
     import os
     import torch

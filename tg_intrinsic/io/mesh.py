@@ -447,7 +447,7 @@ def write_ply(path: str, pos: np.ndarray, face: Optional[np.ndarray] = None,
     """Writes a binary little-endian PLY atomically: positions as doubles,
     ``colors`` (``(N, 3)`` in [0, 1]) as ``red green blue`` bytes, every
     entry of ``properties`` (``(N)`` or ``(N, C)``) as double vertex
-    properties (``name`` or ``name_0 .. name_{C-1}``), and triangles
+    properties (``name``, or ``name_0`` to ``name_{C-1}``), and triangles
     ``face (F, 3)``. MeshLab, CloudCompare, Blender and trimesh read it.
     Returns ``path``."""
     pos = np.asarray(pos, dtype=np.float64)

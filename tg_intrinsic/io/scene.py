@@ -40,6 +40,8 @@ from .mesh import MESH_EXTENSIONS, read_face_uv, read_surface, write_ply
 __all__ = ['FORMAT', 'read_scene', 'write_scene', 'scene_summary',
            'scene_files']
 
+#: The scene folder that :func:`read_scene` reads and :func:`write_scene`
+#: writes, as ``tg-intrinsic svbrdf --help`` shows it.
 FORMAT = r"""SCENE/
   cameras.json       the cameras, and which file is each photograph (required)
   geometry.ply       the surface: a mesh, or a point cloud (with normals

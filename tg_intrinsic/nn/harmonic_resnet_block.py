@@ -14,9 +14,10 @@ from tg_intrinsic.nn.complex_relu import ComplexReLU
 from tg_intrinsic.nn.harmonic_conv import HarmonicConv
 
 
-# The normalisations of HSN's blocks; 'instance' (per shape) is the default:
-# with one mesh per batch, as the papers' protocols train, batch norm's
-# running statistics fit no single mesh (benchmarks/normalisation.py).
+#: The normalisations of HSN's blocks; 'instance' (per shape) is the
+#: default: with one mesh per batch, as the papers' protocols train, batch
+#: norm's running statistics fit no single mesh
+#: (``benchmarks/normalisation.py``).
 COMPLEX_NORMS = ('instance', 'batch', None)
 DEFAULT_COMPLEX_NORM = 'instance'
 

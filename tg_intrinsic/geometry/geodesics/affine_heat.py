@@ -40,7 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-# Sources solved together (right-hand side columns) at most.
+#: Sources solved together (right-hand side columns) at most.
 CENTRE_CHUNK = 256
 
 

@@ -1,0 +1,36 @@
+"""The API reference's pages: each lists the public names (``__all__``) of
+its modules, in this order, a name shown once (re-exports under the first
+module that lists them; a module whose names are all shown already gets no
+section). ``conf.py`` writes the pages from this at every
+build; ``tests/test_docs.py`` checks that every module with an ``__all__``
+is here."""
+
+#: page title -> modules
+API_PAGES = {
+    'tg_intrinsic': ['tg_intrinsic', 'tg_intrinsic.surface_attributes'],
+    'geometry': ['tg_intrinsic.geometry', 'tg_intrinsic.geometry.texture',
+                 'tg_intrinsic.geometry.sphere_images',
+                 'tg_intrinsic.geometry.pointcloud',
+                 'tg_intrinsic.geometry.pointcloud.neighbors',
+                 'tg_intrinsic.geometry.pointcloud.diffusion',
+                 'tg_intrinsic.geometry.geodesics',
+                 'tg_intrinsic.geometry.geodesics.logmap',
+                 'tg_intrinsic.geometry.geodesics.harmonic',
+                 'tg_intrinsic.geometry.geodesics.affine_heat',
+                 'tg_intrinsic.geometry.multigrid',
+                 'tg_intrinsic.geometry.appearance',
+                 'tg_intrinsic.geometry.appearance.cameras',
+                 'tg_intrinsic.geometry.appearance.raster',
+                 'tg_intrinsic.geometry.appearance.lighting',
+                 'tg_intrinsic.geometry.appearance.direct_lighting'],
+    'transforms': ['tg_intrinsic.transforms'],
+    'nn': ['tg_intrinsic.nn', 'tg_intrinsic.nn.harmonic_resnet_block'],
+    'nn.models': ['tg_intrinsic.nn.models'],
+    'pool': ['tg_intrinsic.pool'],
+    'solvers': ['tg_intrinsic.solvers'],
+    'datasets': ['tg_intrinsic.datasets', 'tg_intrinsic.datasets.capture'],
+    'io': ['tg_intrinsic.io', 'tg_intrinsic.io.scene', 'tg_intrinsic.io.gltf'],
+    'train and protocols': ['tg_intrinsic.train', 'tg_intrinsic.protocols',
+                            'tg_intrinsic.devices',
+                            'tg_intrinsic.distributed'],
+}

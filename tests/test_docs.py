@@ -1,0 +1,88 @@
+"""The API reference's inputs: every module with public names (an
+``__all__``) has a section in ``docs/api_pages.py``, and every public name
+has a docstring of its own (a constant: a ``#:`` comment where it is
+defined), so that the generated pages are never empty. The site itself is
+built by ``make docs`` (warnings are errors), a step of ``.ci/run``."""
+import importlib
+import inspect
+import os
+import pkgutil
+import sys
+import warnings
+
+import pytest
+
+import tg_intrinsic
+
+DOCS = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'docs')
+
+
+def modules_with_public_names():
+    with warnings.catch_warnings():  # the deprecated module paths warn
+        warnings.simplefilter('ignore', DeprecationWarning)
+        found = [tg_intrinsic]
+        for info in pkgutil.walk_packages(tg_intrinsic.__path__,
+                                          'tg_intrinsic.'):
+            found.append(importlib.import_module(info.name))
+    return [m for m in found if hasattr(m, '__all__')]
+
+
+def api_pages():
+    sys.path.insert(0, DOCS)
+    try:
+        return importlib.import_module('api_pages').API_PAGES
+    finally:
+        sys.path.remove(DOCS)
+
+
+def test_every_module_with_public_names_has_an_api_section():
+    listed = [m for modules in api_pages().values() for m in modules]
+    assert len(listed) == len(set(listed))
+    missing = sorted({m.__name__ for m in modules_with_public_names()}
+                     - set(listed))
+    assert not missing, (f"add these modules to docs/api_pages.py: "
+                         f"{missing}")
+    for name in listed:  # and no stale entry
+        assert hasattr(importlib.import_module(name), '__all__'), name
+
+
+def attribute_docs():
+    """``{(module name, attribute)}`` documented by a ``#:`` comment."""
+    from sphinx.pycode import ModuleAnalyzer
+    documented = set()
+    for module in modules_with_public_names():
+        for (_, name) in ModuleAnalyzer.for_module(
+                module.__name__).find_attr_docs():
+            documented.add(name)
+    return documented
+
+
+def test_every_public_name_has_a_docstring():
+    pytest.importorskip('sphinx')
+    documented = attribute_docs()
+    undocumented = []
+    for module in modules_with_public_names():
+        for name in module.__all__:
+            obj = getattr(module, name)
+            if inspect.ismodule(obj):
+                continue
+            if inspect.isclass(obj) or inspect.isroutine(obj):
+                ok = bool((obj.__doc__ or '').strip())
+            else:  # a constant: its #: comment
+                ok = name in documented
+            if not ok:
+                undocumented.append(f'{module.__name__}.{name}')
+    assert not undocumented, f"no docstring: {undocumented}"
+
+
+def test_the_version_is_defined_once():
+    from tg_intrinsic.cli import build_parser
+    root = os.path.join(DOCS, '..')
+    setup = open(os.path.join(root, 'setup.py')).read()
+    assert "version=VERSION" in setup and tg_intrinsic.__version__ not in \
+        setup
+    changelog = open(os.path.join(root, 'CHANGELOG.md')).read()
+    assert f'## {tg_intrinsic.__version__}' in changelog
+    with pytest.raises(SystemExit) as exit_info:
+        build_parser().parse_args(['--version'])
+    assert exit_info.value.code == 0

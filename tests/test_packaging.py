@@ -1,0 +1,99 @@
+"""The package as users get it: ``python -m build`` makes an sdist and a
+wheel that ``twine check`` accepts; the wheel holds every module of the
+source tree and, installed into a fresh virtual environment (not editable,
+not from the source tree), runs the command line and imports every
+package from a folder outside the repository. The fresh environment takes
+the dependencies from the test's own environment (a path entry, whose own
+``.pth`` files, this checkout's editable install among them, are not
+run), so nothing is downloaded."""
+import glob
+import os
+import subprocess
+import sys
+import sysconfig
+import zipfile
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+PACKAGES = ('tg_intrinsic', 'tg_intrinsic.geometry', 'tg_intrinsic.transforms',
+            'tg_intrinsic.nn', 'tg_intrinsic.nn.models', 'tg_intrinsic.pool',
+            'tg_intrinsic.solvers', 'tg_intrinsic.datasets', 'tg_intrinsic.io',
+            'tg_intrinsic.train', 'tg_intrinsic.protocols',
+            'tg_intrinsic.cli')
+
+
+def run(command, **kwargs):
+    result = subprocess.run(command, capture_output=True, text=True,
+                            **kwargs)
+    assert result.returncode == 0, (
+        f"{' '.join(map(str, command))} exited {result.returncode}:\n"
+        f"{result.stdout[-3000:]}\n{result.stderr[-3000:]}")
+    return result
+
+
+@pytest.fixture(scope='module')
+def dist(tmp_path_factory):
+    pytest.importorskip('build')
+    out = tmp_path_factory.mktemp('dist')
+    # --no-isolation: the build backend of this environment, no download
+    run([sys.executable, '-m', 'build', '--no-isolation', '--outdir',
+         str(out), ROOT], cwd=ROOT)
+    return out
+
+
+def test_sdist_and_wheel_pass_twine_check(dist):
+    pytest.importorskip('twine')
+    sdist = glob.glob(str(dist / 'tg_intrinsic-*.tar.gz'))
+    wheel = glob.glob(str(dist / 'tg_intrinsic-*-py3-none-any.whl'))
+    assert len(sdist) == 1 and len(wheel) == 1
+    run([sys.executable, '-m', 'twine', 'check', '--strict', *sdist, *wheel])
+
+
+def test_the_wheel_holds_every_module_and_the_version(dist):
+    import tg_intrinsic
+    wheel, = glob.glob(str(dist / 'tg_intrinsic-*.whl'))
+    assert os.path.basename(wheel).startswith(
+        f'tg_intrinsic-{tg_intrinsic.__version__}-')
+    names = set(zipfile.ZipFile(wheel).namelist())
+    source = {os.path.relpath(path, ROOT).replace(os.sep, '/') for path in
+              glob.glob(os.path.join(ROOT, 'tg_intrinsic', '**', '*'),
+                        recursive=True)
+              if os.path.isfile(path) and '__pycache__' not in path}
+    assert source - names == set()
+    entry_points = [n for n in names if n.endswith('entry_points.txt')]
+    text = zipfile.ZipFile(wheel).read(entry_points[0]).decode()
+    assert 'tg-intrinsic = tg_intrinsic.cli:entry_point' in text
+
+
+def test_the_wheel_works_outside_the_repository(dist, tmp_path):
+    import tg_intrinsic
+    wheel, = glob.glob(str(dist / 'tg_intrinsic-*.whl'))
+    venv = tmp_path / 'venv'
+    run([sys.executable, '-m', 'venv', str(venv)])
+    python = venv / 'bin' / 'python'
+    site = run([str(python), '-c', 'import sysconfig; print(sysconfig.'
+                'get_paths()["purelib"])']).stdout.strip()
+    # the dependencies: this environment's packages, appended to the path
+    with open(os.path.join(site, 'dependencies.pth'), 'w') as f:
+        f.write(sysconfig.get_paths()['purelib'] + '\n')
+    run([str(python), '-m', 'pip', 'install', '--no-index', '--no-deps',
+         '--no-cache-dir', '-q', wheel])
+    outside = tmp_path / 'elsewhere'
+    outside.mkdir()
+    env = {k: v for k, v in os.environ.items() if k != 'PYTHONPATH'}
+    env.update(OMP_NUM_THREADS='1', NUMBA_NUM_THREADS='1')
+    where = run([str(python), '-c', 'import tg_intrinsic; print('
+                 'tg_intrinsic.__file__, tg_intrinsic.__version__)'],
+                cwd=outside, env=env).stdout.split()
+    assert where[0].startswith(site) and where[1] == tg_intrinsic.__version__
+    command = str(venv / 'bin' / 'tg-intrinsic')
+    version = run([command, '--version'], cwd=outside, env=env).stdout
+    assert version.strip() == f'tg-intrinsic {tg_intrinsic.__version__}'
+    info = run([command, 'info'], cwd=outside, env=env).stdout
+    assert tg_intrinsic.__version__ in info
+    run([str(python), '-c', '; '.join(f'import {p}' for p in PACKAGES)],
+        cwd=outside, env=env)
+    run([command, 'demo', '--quick', '--out', str(outside / 'demo')],
+        cwd=outside, env=env)
+    assert (outside / 'demo' / 'summary.json').is_file()

@@ -22,9 +22,8 @@ MAP_INFO = {
     'entropy': {'title': 'uncertainty', 'label': 'normalised entropy (0 '
                 'certain, 1 unknown)', 'cmap': 'turbo', 'range': (0.0, 1.0)},
     'roughness_std': {'title': 'roughness uncertainty', 'label':
-                      'estimated standard deviation of the roughness '
-                      '(0 to 0.1 and above)', 'cmap': 'turbo',
-                      'range': (0.0, 0.1)},
+                      'roughness std (top: 0.1 or more)',
+                      'cmap': 'turbo', 'range': (0.0, 0.1)},
 }
 #: The uncertainty maps, drawn through their colormap in images.
 UNCERTAINTY_MAPS = ('entropy', 'roughness_std')

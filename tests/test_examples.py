@@ -48,5 +48,7 @@ def test_example_runs(script, tmp_path):
         assert re.search(pattern, run.stdout), \
             f"{script} did not print /{pattern}/:\n{run.stdout[-3000:]}"
     assert os.path.exists(tmp_path / 'results.json')
+    # the figure the documentation's gallery shows
+    assert os.path.getsize(tmp_path / 'figure.png') > 0
     # nothing is written outside --out (the source tree stays clean)
     assert not os.path.exists(os.path.join(EXAMPLES, 'runs'))

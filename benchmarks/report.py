@@ -1079,11 +1079,10 @@ def svbrdf_mitsuba(d, _):
            if all(s is not None for s in seeded)
            else "only on some maps within the budget")
         + '.')
-    ranks = [r['ours'][default].get('spearman_roughness_std_roughness_error')
+    ranks = [r['ours'][default]['spearman_roughness_std_roughness_error']
              for r in rows]
-    if all(rank is not None for rank in ranks):
-        result += (f" The default's `roughness_std` ranks its per-point "
-                   f"roughness error at Spearman {span(ranks, signed, ' to ')}.")
+    result += (f" The default's `roughness_std` ranks its per-point "
+               f"roughness error at Spearman {span(ranks, signed, ' to ')}.")
     out.append(("SVBRDF: the command's default (full-integral refinement) "
                 "vs. `prb` alone, time to prb's best error",
                 'svbrdf_mitsuba.py', result))

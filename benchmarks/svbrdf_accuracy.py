@@ -231,16 +231,13 @@ def seed_spread_spearman(prepared, result, data, seen) -> float:
     error: how far chance in those samples explains the error."""
     tv_weight = inspect.signature(FrequencySVBRDF.recover).parameters[
         'tv_weight'].default
-    roughness = [result.roughness]
-    for seed in range(ENSEMBLE_SEEDS):
+    roughness = [result.roughness]  # seed 0
+    for seed in range(1, ENSEMBLE_SEEDS):
         model = FrequencySVBRDF(data.num_nodes)
         model.initialize(prepared)
-        again = model.refine(prepared, seed=seed, tv_weight=tv_weight,
-                             progress=False)
-        if seed == 0:  # the default itself: the same start and samples
-            assert torch.allclose(again.roughness, result.roughness)
-        else:
-            roughness.append(again.roughness)
+        roughness.append(model.refine(prepared, seed=seed,
+                                      tv_weight=tv_weight,
+                                      progress=False).roughness)
     spread = torch.stack(roughness).std(0)
     error = (result.roughness - data.roughness).abs()
     return float(spearmanr(spread[seen].numpy(),

@@ -112,17 +112,11 @@ def link_external(app, env, node, contnode):
 
 
 # -- the API reference, one page per entry of API_PAGES ---------------------
-def public_names(module_name):
-    module = importlib.import_module(module_name)
-    return list(getattr(module, '__all__', []))
-
-
 def write_api_pages():
     """``api/<page>.rst`` with an autosummary table per module, each name
     under the first module of the page that lists it."""
     folder = os.path.join(DOCS, 'api', 'pages')
     os.makedirs(folder, exist_ok=True)
-    pages = []
     for title, modules in API_PAGES.items():
         slug = title.replace(' ', '_').replace('.', '_')
         lines = [title, '=' * len(title), '']
@@ -130,7 +124,7 @@ def write_api_pages():
         for module_name in modules:
             module = importlib.import_module(module_name)
             # sub-packages have pages of their own
-            names = [n for n in public_names(module_name) if n not in shown
+            names = [n for n in module.__all__ if n not in shown
                      and not n.startswith('__')
                      and not inspect.ismodule(getattr(module, n))]
             if not names:
@@ -147,11 +141,9 @@ def write_api_pages():
         if not os.path.exists(path) or open(path).read() != text:
             with open(path, 'w') as f:
                 f.write(text)
-        pages.append(slug)
-    return pages
 
 
-API_FILES = write_api_pages()
+write_api_pages()
 
 
 def setup(app):

@@ -48,6 +48,7 @@ def test_the_pages_have_what_this_test_reads():
                           recursive=True):
         if blocks(path, 'python'):
             assert os.path.abspath(path) in map(os.path.abspath, PAGES)
+    assert set(PROMISES) <= {os.path.relpath(page, ROOT) for page in PAGES}
     commands = {line.split()[1] for line in command_lines()}
     assert {'info', 'solve', 'precompute', 'svbrdf', 'train'} <= commands
 
@@ -75,25 +76,24 @@ def run_blocks(path, tmp_path):
     return namespace
 
 
+# what a page's blocks promise to leave behind, by page
+PROMISES = {
+    'README.md': lambda ns, tmp: ns['logits'].shape[-1]
+    == ns['clouds'].num_classes,
+    'docs/methods/hsn.md': lambda ns, tmp: ns['logits'].shape[-1]
+    == ns['meshes'].num_classes,
+    'docs/methods/gravo_mg.md': lambda ns, tmp: tuple(ns['X'].shape) == (
+        ns['n'], 16) and ns['fine'].shape == ns['surface'].pos.shape,
+    'docs/methods/svbrdf.md': lambda ns, tmp: (
+        tmp / 'runs' / 'svbrdf' / 'maps.npz').exists(),
+}
+
+
 @pytest.mark.parametrize('page', PAGES,
                          ids=[os.path.relpath(p, ROOT) for p in PAGES])
 def test_the_python_blocks_run_in_order(page, tmp_path, monkeypatch):
     make_mesh_folder(tmp_path / 'meshes')
     monkeypatch.chdir(tmp_path)
     namespace = run_blocks(page, tmp_path)
-    # what the blocks promise to leave behind
-    promises = {
-        'README.md': lambda: namespace['logits'].shape[-1]
-        == namespace['clouds'].num_classes,
-        'methods/svbrdf.md': lambda: (tmp_path / 'runs' / 'svbrdf'
-                                      / 'maps.npz').exists(),
-        'methods/gravo_mg.md': lambda: tuple(namespace['X'].shape) == (
-            namespace['n'], 16) and namespace['fine'].shape
-        == namespace['surface'].pos.shape,
-        'methods/hsn.md': lambda: namespace['logits'].shape[-1]
-        == namespace['meshes'].num_classes,
-    }
-    key = os.path.relpath(page, os.path.join(ROOT, 'docs'))
-    key = 'README.md' if page == README else key
-    if key in promises:
-        assert promises[key]()
+    promise = PROMISES.get(os.path.relpath(page, ROOT))
+    assert promise is None or promise(namespace, tmp_path)

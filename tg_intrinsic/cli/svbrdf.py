@@ -36,8 +36,6 @@ from .common import (UsageError, default_of, stage, nonnegative_float,
 
 HELP = 'recover SVBRDF maps and their uncertainty from HDR photographs'
 
-MAP_NAMES = ('base_color', 'metallic', 'roughness', 'entropy',
-             'roughness_std')
 SPECULAR_MODELS = ('eq5.11', 'split_sum')
 VISIBILITY = ('auto', 'geometry', 'horizon')
 # a 16k x 16k texture is 1 GB per map: larger is a typing mistake
@@ -551,7 +549,7 @@ def _write_outputs(out: str, data, result, maps: dict, name: str) -> list:
     files = [result.save_npz(os.path.join(out, 'maps.npz'))]
     normals = {k: normal[:, i] for i, k in enumerate(('nx', 'ny', 'nz'))}
     points = f"{len(pos)} {'vertices' if face is not None else 'points'}"
-    for key in MAP_NAMES:
+    for key in MAP_INFO:
         value = np.asarray(maps[key], dtype=np.float64)
         info = MAP_INFO[key]
         if value.ndim == 2:  # the base colour is its own colour
@@ -617,6 +615,7 @@ def _print_summary(out: str, report: dict):
         f", {texture['size']} x {texture['size']} textures on "
         f"{'the mesh' if texture['uv'] == 'mesh' else 'an atlas'}'s UVs "
         f"(*_texture.png, svbrdf.glb)")
-    lines.append(f"wrote {out}: maps.npz, {', '.join(MAP_NAMES)} (.ply and "
+    from tg_intrinsic.nn.svbrdf_result import MAP_INFO
+    lines.append(f"wrote {out}: maps.npz, {', '.join(MAP_INFO)} (.ply and "
                  f".png){textures}, report.json ({seconds['total']:.1f} s)")
     print('\n'.join(lines))

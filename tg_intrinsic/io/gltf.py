@@ -10,6 +10,7 @@ from typing import Optional
 
 import numpy as np
 
+from tg_intrinsic.nn.svbrdf_result import MAP_INFO, scaled_to_range
 from tg_intrinsic.utils import atomic_write
 
 __all__ = ['srgb_encode', 'to_bytes', 'write_png', 'write_glb',
@@ -97,12 +98,9 @@ def write_glb(path: str, pos: np.ndarray, face: np.ndarray,
     return path
 
 
-#: Texture files of :func:`write_textured_model`, by map.
-TEXTURE_FILES = {'base_color': 'base_color_texture.png',
-                 'metallic': 'metallic_texture.png',
-                 'roughness': 'roughness_texture.png',
-                 'entropy': 'entropy_texture.png',
-                 'roughness_std': 'roughness_std_texture.png'}
+#: Texture files of :func:`write_textured_model`, by map (every map of
+#: :data:`~tg_intrinsic.nn.svbrdf_result.MAP_INFO`).
+TEXTURE_FILES = {name: f'{name}_texture.png' for name in MAP_INFO}
 #: The glTF binary of :func:`write_textured_model`.
 GLB_FILE = 'svbrdf.glb'
 
@@ -142,7 +140,6 @@ def write_textured_model(folder: str, pos, face, maps: dict, size: int,
     import os
     import torch
     from tg_intrinsic.geometry import bake_texture, uv_atlas
-    from tg_intrinsic.nn.svbrdf_result import scaled_to_range
     pos = torch.as_tensor(pos).detach().cpu().double()
     face = torch.as_tensor(face).detach().cpu()
     made = face_uv is None

@@ -1,5 +1,18 @@
 r"""Data transforms: read a :class:`~torch_geometric.data.Data`, call
-:mod:`tg_intrinsic.geometry`, write attributes. Inputs are never mutated."""
+:mod:`tg_intrinsic.geometry`, write attributes. Inputs are never mutated.
+
+On a collated :class:`~torch_geometric.data.Batch`, every transform runs on
+each of its graphs alone and collates the results again: the output equals
+applying the transform to every sample and collating them (``ptr``,
+``batch`` and index offsets fit the new graphs, and
+:meth:`~torch_geometric.data.Batch.to_data_list` works). Random
+augmentations (:class:`RandomRotation`, :class:`RandomAxisScale`,
+:class:`RandomTranslation`) therefore draw independent randomness for
+every graph, one graph after the other, as per-sample augmentation does.
+:class:`TextureTexels`, whose output PyG cannot collate, refuses a batch
+with a :class:`ValueError`, as does any transform whose results differ in
+their keys between the graphs (e.g. :class:`GravoHierarchy` giving them
+different numbers of levels)."""
 from .estimate_normals import EstimateNormals
 from .tangent_frames import TangentFrames
 from .mls_operators import MLSOperators

@@ -1,9 +1,9 @@
 import torch
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry import face_areas, weld_vertices
+from tg_intrinsic.transforms._batching import GraphTransform
 from tg_intrinsic.transforms._mesh_ops import (DEGENERATE_TOLERANCE,
                                               check_mesh_data, compact,
                                               component_labels,
@@ -13,7 +13,7 @@ from tg_intrinsic.transforms._mesh_ops import (DEGENERATE_TOLERANCE,
 
 
 @functional_transform('clean_mesh')
-class CleanMesh(BaseTransform):
+class CleanMesh(GraphTransform):
     r"""Makes a raw scanned or exported mesh usable by the surface
     transforms (functional name: :obj:`clean_mesh`), in this order:
 

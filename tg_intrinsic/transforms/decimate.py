@@ -4,8 +4,8 @@ import numpy as np
 import torch
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
+from tg_intrinsic.transforms._batching import GraphTransform
 from tg_intrinsic.transforms._mesh_ops import (check_mesh_data, compact,
                                               fan_triangulate,
                                               nearest_vertices,
@@ -13,7 +13,7 @@ from tg_intrinsic.transforms._mesh_ops import (check_mesh_data, compact,
 
 
 @functional_transform('decimate')
-class Decimate(BaseTransform):
+class Decimate(GraphTransform):
     r"""Simplifies a triangle mesh to about :obj:`num_vertices` vertices
     (or a :obj:`ratio` of them) by quadric edge collapses (functional
     name: :obj:`decimate`), with the ``fast-simplification`` package

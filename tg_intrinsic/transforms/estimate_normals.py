@@ -1,14 +1,14 @@
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.surface_attributes import (computed_normals,
                                              resolve_normals)
+from tg_intrinsic.transforms._batching import GraphTransform
 
 
 @functional_transform('estimate_normals')
-class EstimateNormals(BaseTransform):
+class EstimateNormals(GraphTransform):
     r"""Writes unit normals to ``data.normal`` (functional name:
     :obj:`estimate_normals`).
 

@@ -4,10 +4,10 @@ import numpy as np
 import torch
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry import fps, mesh_edges
 from tg_intrinsic.geometry.multigrid.voronoi import graph_voronoi
+from tg_intrinsic.transforms._batching import GraphTransform
 from tg_intrinsic.transforms._mesh_ops import (check_mesh_data, compact,
                                               component_labels,
                                               fan_triangulate,
@@ -18,7 +18,7 @@ from tg_intrinsic.transforms._mesh_ops import (check_mesh_data, compact,
 
 
 @functional_transform('farthest_point_resample')
-class FarthestPointResample(BaseTransform):
+class FarthestPointResample(GraphTransform):
     r"""Resamples a mesh to :obj:`num_vertices` vertices chosen by farthest
     point sampling and rebuilds a triangle mesh on them (functional name:
     :obj:`farthest_point_resample`), as `"CNNs on Surfaces using

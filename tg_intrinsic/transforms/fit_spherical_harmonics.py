@@ -3,7 +3,6 @@ import math
 import torch
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry import tangent_frames
 from tg_intrinsic.geometry.appearance.brdf import reflect, to_local
@@ -16,10 +15,11 @@ from tg_intrinsic.geometry.appearance.sh import (fit_light, fit_sh,
 from tg_intrinsic.geometry.checks import (check_frames, check_points,
                                           check_positive_float,
                                           check_positive_int, check_vectors)
+from tg_intrinsic.transforms._batching import GraphTransform
 
 
 @functional_transform('fit_spherical_harmonics')
-class FitSphericalHarmonics(BaseTransform):
+class FitSphericalHarmonics(GraphTransform):
     r"""Fits spherical harmonics to the incoming and the observed outgoing
     radiance of every point, in its local frame (Wiersma et al.,
     "Uncertainty for SVBRDF Acquisition using Frequency Analysis",

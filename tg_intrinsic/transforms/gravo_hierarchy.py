@@ -1,16 +1,16 @@
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry.checks import check_points, check_positive_int
 from tg_intrinsic.geometry.multigrid.gravo import (check_options,
                                                    gravo_hierarchy)
 from tg_intrinsic.surface_attributes import surface_graph
+from tg_intrinsic.transforms._batching import GraphTransform
 
 
 @functional_transform('gravo_hierarchy')
-class GravoHierarchy(BaseTransform):
+class GravoHierarchy(GraphTransform):
     r"""Builds a Gravo MG multigrid hierarchy (Wiersma et al., "A Fast
     Geometric Multigrid Method for Curved Surfaces", SIGGRAPH 2023;
     functional name: :obj:`gravo_hierarchy`).

@@ -2,14 +2,15 @@ from typing import Optional
 
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.geometry.geodesics.harmonic import harmonic_terms
+from tg_intrinsic.surface_attributes import check_operator_graph
+from tg_intrinsic.transforms._batching import GraphTransform
 
 
 @functional_transform('harmonic_precompute')
-class HarmonicPrecompute(BaseTransform):
+class HarmonicPrecompute(GraphTransform):
     r"""Precomputes the parameter-free part of every circular-harmonic filter
     of Harmonic Surface Networks per edge, ring and order (functional name:
     :obj:`harmonic_precompute`):
@@ -47,6 +48,7 @@ class HarmonicPrecompute(BaseTransform):
                        check_positive_int(levels, 'levels', minimum=0))
 
     def forward(self, data: Data) -> Data:
+        check_operator_graph(data, 'logmap', 'LogMap')
         data = data.clone()
         level = 0
         while True:

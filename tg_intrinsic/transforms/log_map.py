@@ -3,7 +3,6 @@ from typing import Optional
 import torch
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry.checks import (check_positive_float,
                                           check_positive_int)
@@ -11,11 +10,13 @@ from tg_intrinsic.geometry import (geodesic_neighbourhoods, log_map,
                                    vertex_area_weights)
 from tg_intrinsic.geometry.geodesics.logmap import (MAX_DISC_MEMORY, METHODS,
                                                     hsn_bytes_per_edge)
-from tg_intrinsic.surface_attributes import resolve_frames
+from tg_intrinsic.surface_attributes import (record_operator_graph,
+                                             resolve_frames)
+from tg_intrinsic.transforms._batching import GraphTransform
 
 
 @functional_transform('log_map')
-class LogMap(BaseTransform):
+class LogMap(GraphTransform):
     r"""Builds geodesic discs and the log map of every neighbour in the
     tangent frame of its centre, for Harmonic Surface Networks (functional
     name: :obj:`log_map`):
@@ -104,7 +105,7 @@ class LogMap(BaseTransform):
         data.frame = frame
         data.logmap_radius = torch.tensor([float(self.radius)],
                                           dtype=data.pos.dtype)
-        return data
+        return record_operator_graph(data)
 
     def __repr__(self) -> str:
         memory = ('' if self.max_memory == MAX_DISC_MEMORY

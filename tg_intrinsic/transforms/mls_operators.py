@@ -1,16 +1,18 @@
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry.checks import (check_positive_float,
                                           check_positive_int)
 from tg_intrinsic.geometry.pointcloud.mls import (MIN_MLS_NEIGHBOURS,
                                                   build_mls_operators)
-from tg_intrinsic.surface_attributes import mls_parameters, resolve_frames
+from tg_intrinsic.surface_attributes import (mls_parameters,
+                                             record_operator_graph,
+                                             resolve_frames)
+from tg_intrinsic.transforms._batching import GraphTransform
 
 
 @functional_transform('mls_operators')
-class MLSOperators(BaseTransform):
+class MLSOperators(GraphTransform):
     r"""Builds DeltaConv's moving-least-squares gradient and divergence
     (functional name: :obj:`mls_operators`), from the `"DeltaConv"
     <https://arxiv.org/abs/2111.08799>`_ paper.
@@ -70,7 +72,7 @@ class MLSOperators(BaseTransform):
         # its own parameters (one row per example once batched).
         data.mls_parameters = mls_parameters(
             self.k, self.regularizer, self.kernel_width, self.normalized)
-        return data
+        return record_operator_graph(data)
 
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}(k={self.k}, '

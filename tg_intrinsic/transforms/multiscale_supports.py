@@ -3,7 +3,6 @@ from typing import Optional, Sequence
 import torch
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry.checks import (check_positive_float,
                                           check_positive_int)
@@ -14,11 +13,12 @@ from tg_intrinsic.geometry.geodesics.logmap import (MAX_DISC_MEMORY, METHODS,
                                           hsn_bytes_per_edge)
 from tg_intrinsic.geometry.multigrid.voronoi import graph_voronoi
 from tg_intrinsic.surface_attributes import resolve_frames
+from tg_intrinsic.transforms._batching import GraphTransform
 from tg_intrinsic.transforms.log_map import LogMap
 
 
 @functional_transform('multiscale_supports')
-class MultiscaleSupports(BaseTransform):
+class MultiscaleSupports(GraphTransform):
     r"""Builds the pooling levels of a Harmonic Surface Network and the
     geodesic discs of every level (functional name:
     :obj:`multiscale_supports`).

@@ -1,12 +1,12 @@
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry import normalize_area
+from tg_intrinsic.transforms._batching import GraphTransform
 
 
 @functional_transform('normalize_area')
-class NormalizeArea(BaseTransform):
+class NormalizeArea(GraphTransform):
     r"""Centres a mesh at its area-weighted centroid and scales it to a
     given surface area (functional name: :obj:`normalize_area`),
 

@@ -1,14 +1,15 @@
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry import log_map
 from tg_intrinsic.geometry.geodesics.logmap import METHODS
-from tg_intrinsic.surface_attributes import resolve_frames
+from tg_intrinsic.surface_attributes import (check_operator_graph,
+                                             resolve_frames)
+from tg_intrinsic.transforms._batching import GraphTransform
 
 
 @functional_transform('parallel_transport')
-class ParallelTransport(BaseTransform):
+class ParallelTransport(GraphTransform):
     r"""Writes the parallel-transport angle of every edge of the disc graph
     (functional name: :obj:`parallel_transport`): transporting
     :math:`e_u(j)` along the shortest geodesic from :math:`p_j` to
@@ -41,6 +42,7 @@ class ParallelTransport(BaseTransform):
         if getattr(data, 'logmap', None) is None:
             raise ValueError("ParallelTransport runs on the disc graph of "
                              "LogMap; apply LogMap(radius) first")
+        check_operator_graph(data, 'logmap', 'LogMap')
         data = data.clone()
         frame = resolve_frames(data)
         _, _, phi = log_map(data.pos, data.edge_index, frame,

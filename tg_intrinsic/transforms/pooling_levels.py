@@ -4,7 +4,6 @@ import torch
 from torch import Tensor
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.data import IntrinsicData
 from tg_intrinsic.geometry import fps, knn, log_map
@@ -12,7 +11,10 @@ from tg_intrinsic.geometry.checks import (check_points,
                                           check_positive_float,
                                           check_positive_int)
 from tg_intrinsic.geometry.pointcloud.mls import build_mls_operators
-from tg_intrinsic.surface_attributes import mls_parameters, resolve_frames
+from tg_intrinsic.surface_attributes import (mls_parameters,
+                                             record_operator_graph,
+                                             resolve_frames)
+from tg_intrinsic.transforms._batching import GraphTransform
 from tg_intrinsic.transforms.gravo_hierarchy import GravoHierarchy
 
 METHODS = ('fps', 'gravo')
@@ -28,7 +30,7 @@ def pooling_record(num_levels: int, ratio: float, k: int,
 
 
 @functional_transform('pooling_levels')
-class PoolingLevels(BaseTransform):
+class PoolingLevels(GraphTransform):
     r"""Builds the pooling levels of a point cloud U-Net with DeltaConv
     operators on every level (functional name: :obj:`pooling_levels`), for
     :class:`~tg_intrinsic.nn.models.DeltaUResNet` (the Delta-U-ResNet of
@@ -136,6 +138,7 @@ class PoolingLevels(BaseTransform):
         out.frame = frame
         out.mls_parameters = mls_parameters(self.k, self.regularizer,
                                             self.kernel_width)
+        record_operator_graph(out)
         if self.method == 'gravo':
             levels = self._gravo(pos)
         else:

@@ -3,7 +3,6 @@ import warnings
 import torch
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry import knn
 from tg_intrinsic.geometry.appearance.cameras import (camera_centers, project,
@@ -12,10 +11,11 @@ from tg_intrinsic.geometry.appearance.cameras import (camera_centers, project,
 from tg_intrinsic.geometry.checks import (check_cameras, check_points,
                                           check_positive_float, check_tensor)
 from tg_intrinsic.surface_attributes import given_normals
+from tg_intrinsic.transforms._batching import GraphTransform
 
 
 @functional_transform('project_views')
-class ProjectViews(BaseTransform):
+class ProjectViews(GraphTransform):
     r"""Gathers, for every surface point, the radiance it shows in a set of
     calibrated HDR photographs (functional name: :obj:`project_views`), the
     input of frequency-domain SVBRDF recovery (Wiersma et al., SIGGRAPH

@@ -3,14 +3,15 @@ from typing import Tuple
 import torch
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
+
+from tg_intrinsic.transforms._batching import GraphTransform
 
 # Attributes that a non-rigid change of the shape makes stale.
 OPERATOR_KEYS = ('edge_index', 'frame', 'grad_weight', 'div_weight')
 
 
 @functional_transform('random_axis_scale')
-class RandomAxisScale(BaseTransform):
+class RandomAxisScale(GraphTransform):
     r"""Scales a shape by an independent random factor along every axis,
     as DeltaConv's ModelNet40 and human-body augmentation does (functional
     name: :obj:`random_axis_scale`):
@@ -27,7 +28,9 @@ class RandomAxisScale(BaseTransform):
     ``frame``, ``grad_weight``, ``div_weight``) are removed: DeltaNet then
     builds them for every batch. Use PyG's
     :class:`~torch_geometric.transforms.RandomScale` for one factor on all
-    axes, which keeps them valid.
+    axes, which keeps them valid. On a collated
+    :class:`~torch_geometric.data.Batch` every graph gets factors of its
+    own, as if scaled before collation.
 
     Args:
         scales (tuple of float): The range :math:`(\text{low}, \text{high})`

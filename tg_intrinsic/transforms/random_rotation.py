@@ -6,10 +6,10 @@ import torch
 from torch import Tensor
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry.checks import check_points
 from tg_intrinsic.surface_attributes import given_normals
+from tg_intrinsic.transforms._batching import GraphTransform
 
 _AXES = {'x': 0, 'y': 1, 'z': 2}
 AXES = ('x', 'y', 'z', 'xyz')
@@ -48,7 +48,7 @@ def random_rotation_matrix(axis: Optional[str] = None,
 
 
 @functional_transform('random_rotation')
-class RandomRotation(BaseTransform):
+class RandomRotation(GraphTransform):
     r"""Rotates a shape rigidly by a random rotation :math:`R`, uniform on
     SO(3) or about one axis (functional name: :obj:`random_rotation`).
 
@@ -61,7 +61,9 @@ class RandomRotation(BaseTransform):
     (``normal`` or ``norm``) and tangent frames (``frame``) turn with the
     points, on every level (``pos_1``, ``frame_1``, ...). Because the frames turn too, per-edge operators that are
     intrinsic to the surface (``grad_weight``, ``div_weight`` of
-    :class:`MLSOperators`) stay valid and are kept.
+    :class:`MLSOperators`) stay valid and are kept. On a collated
+    :class:`~torch_geometric.data.Batch` every graph gets a rotation of
+    its own, as if rotated before collation.
 
     Args:
         axis (str, optional): :obj:`'x'`, :obj:`'y'` or :obj:`'z'` to rotate

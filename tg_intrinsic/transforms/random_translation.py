@@ -5,15 +5,15 @@ import torch
 from torch import Tensor
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry.checks import check_points
+from tg_intrinsic.transforms._batching import GraphTransform
 
 _LEVEL_POS = re.compile(r'pos_[1-9][0-9]*')
 
 
 @functional_transform('random_translation')
-class RandomTranslation(BaseTransform):
+class RandomTranslation(GraphTransform):
     r"""Moves a whole shape by one random offset (functional name:
     :obj:`random_translation`), uniform in a cube; unlike PyG's
     :class:`~torch_geometric.transforms.RandomJitter`, which moves every
@@ -25,6 +25,9 @@ class RandomTranslation(BaseTransform):
     .. math::
         \mathbf{p}_i \mapsto \mathbf{p}_i + \mathbf{t}, \qquad
         \mathbf{t} \sim \mathcal{U}([-t_{\max}, t_{\max}]^3).
+
+    On a collated :class:`~torch_geometric.data.Batch` every graph gets an
+    offset of its own, as if moved before collation.
 
     Args:
         max_offset (float): :math:`t_{\max}`, finite and not negative.

@@ -2,9 +2,8 @@ import math
 from typing import Sequence
 
 import torch
-from torch_geometric.data import Data
+from torch_geometric.data import Batch, Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry.appearance.brdf import reflect, to_local
 from tg_intrinsic.geometry.appearance.envmap import (check_envmap,
@@ -16,6 +15,7 @@ from tg_intrinsic.geometry.checks import (check_positive_float,
                                           check_positive_int,
                                           check_view_indices)
 
+from ._batching import GraphTransform, map_graphs
 from .fit_spherical_harmonics import FitSphericalHarmonics
 
 #: Attributes with one entry per view on their first axis; the observations
@@ -33,7 +33,9 @@ def keep_views(data: Data, views) -> Data:
     and records the original indices in ``view_index`` (composed with an
     earlier ``view_index``). Run it before
     :class:`~tg_intrinsic.transforms.FitSphericalHarmonics`, whose outputs
-    depend on the views.
+    depend on the views. A collated
+    :class:`~torch_geometric.data.Batch` keeps the same views of every
+    capture in it.
 
     Args:
         data (Data): A capture (``obs_mask`` :math:`(N, V)` at least).
@@ -41,8 +43,12 @@ def keep_views(data: Data, views) -> Data:
             :math:`[0, V)`.
 
     Returns:
-        :class:`~torch_geometric.data.Data`.
+        :class:`~torch_geometric.data.Data`, or a
+        :class:`~torch_geometric.data.Batch` for a batch.
     """
+    if isinstance(data, Batch):
+        return map_graphs(lambda graph: keep_views(graph, views), data,
+                          'keep_views')
     mask = getattr(data, 'obs_mask', None)
     if mask is None or mask.dim() != 2:
         raise ValueError("keep_views needs the observations 'data.obs_mask' "
@@ -74,7 +80,7 @@ def keep_views(data: Data, views) -> Data:
 
 
 @functional_transform('select_views')
-class SelectViews(BaseTransform):
+class SelectViews(GraphTransform):
     r"""Keeps the :obj:`num_views` views that are expected to lower the
     spectral uncertainty the most, chosen greedily from :obj:`seed_views`
     by :func:`~tg_intrinsic.geometry.appearance.view_selection.select_views`

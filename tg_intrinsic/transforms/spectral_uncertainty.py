@@ -2,17 +2,17 @@ import math
 
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry.checks import (check_positive_float,
                                            check_positive_int)
 from tg_intrinsic.geometry.appearance.brdf import (observed_spectra,
                                                    spectral_uncertainty)
 from tg_intrinsic.geometry.appearance.sh import torrance_sparrow_to_principled
+from tg_intrinsic.transforms._batching import GraphTransform
 
 
 @functional_transform('spectral_uncertainty')
-class SpectralUncertainty(BaseTransform):
+class SpectralUncertainty(GraphTransform):
     r"""Per-point uncertainty of the specular parameters from power spectra
     (Wiersma et al., "Uncertainty for SVBRDF Acquisition using Frequency
     Analysis", SIGGRAPH 2025, eqs. 5.19-5.25; functional name:

@@ -1,13 +1,13 @@
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.surface_attributes import given_normals, resolve_frames
+from tg_intrinsic.transforms._batching import GraphTransform
 
 
 @functional_transform('tangent_frames')
-class TangentFrames(BaseTransform):
+class TangentFrames(GraphTransform):
     r"""Writes an orthonormal, right-handed tangent frame per point to
     ``data.frame`` (functional name: :obj:`tangent_frames`).
 

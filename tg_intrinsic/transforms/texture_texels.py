@@ -2,13 +2,13 @@ from typing import Sequence, Tuple
 
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
-from torch_geometric.transforms import BaseTransform
 
 from tg_intrinsic.geometry import vertex_normals, weld_vertices
 from tg_intrinsic.geometry.checks import (check_faces, check_image_size,
                                           check_points, check_unit_interval)
 from tg_intrinsic.geometry.texture import rasterize_uv
 from tg_intrinsic.surface_attributes import given_normals
+from tg_intrinsic.transforms._batching import GraphTransform
 from tg_intrinsic.transforms._mesh_ops import split_attributes
 
 # The capture: per view or global, never per vertex or per face, whatever
@@ -19,7 +19,7 @@ MESH_KEYS = ('pos', 'face', 'uv', 'face_uv', 'normal', 'norm', 'frame')
 
 
 @functional_transform('texture_texels')
-class TextureTexels(BaseTransform):
+class TextureTexels(GraphTransform):
     r"""Turns a UV-mapped triangle mesh into the covered texels of an
     :math:`(H, W)` texture (functional name: :obj:`texture_texels`), so
     that frequency-domain SVBRDF recovery (Wiersma et al., SIGGRAPH 2025)
@@ -60,7 +60,9 @@ class TextureTexels(BaseTransform):
     (observations per vertex, ``x``, ...) are dropped; per-triangle
     tensors take the value of the texel's triangle. ``texel_index``
     indexes the texture, not the points, so batching such data with PyG
-    (which offsets ``*_index`` keys by the point count) is not supported.
+    (which offsets ``*_index`` keys by the point count) is not supported,
+    and the transform refuses a collated
+    :class:`~torch_geometric.data.Batch`.
 
     Args:
         texture_shape (tuple): ``(H, W)``, the texture's rows and columns.
@@ -83,6 +85,10 @@ class TextureTexels(BaseTransform):
           increasing), ``texel_face`` :math:`(N)`, ``texel_bary``
           :math:`(N, 3)`, ``texture_shape`` ``(H, W)``, :math:`N \leq HW`
     """
+    batch_refusal = ("its texel_index numbers texels of a texture and "
+                     "mesh_face the triangles of the kept mesh, which PyG's "
+                     "collation would offset and concatenate wrongly")
+
     def __init__(self, texture_shape: Tuple[int, int],
                  interpolate: Sequence[str] = (), keep_mesh: bool = True):
         self.texture_shape = check_image_size(texture_shape, 'texture_shape')

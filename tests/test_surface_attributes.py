@@ -7,8 +7,8 @@ from tg_intrinsic.geometry import (estimate_normals, tangent_frames,
 from tg_intrinsic.nn.models import DeltaNetClassification
 from tg_intrinsic.surface_attributes import (check_mls_parameters,
                                              computed_normals, given_normals,
-                                             mls_parameters, resolve_frames,
-                                             resolve_normals)
+                                             mls_parameters, operator_graph,
+                                             resolve_frames, resolve_normals)
 from tg_intrinsic.transforms import (EstimateNormals, LogMap, MLSOperators,
                                      TangentFrames)
 
@@ -114,3 +114,43 @@ def test_mls_parameters_have_one_owner():
     with pytest.warns(UserWarning, match='no record'):
         check_mls_parameters(data, 10, 1e-3, 1.0)
     assert mls_parameters(10, 1e-3, 1.0).tolist() == [[10, 1e-3, 1.0, 1.0]]
+
+
+@pytest.mark.parametrize('edit', ['ToUndirected', 'RemoveDuplicatedEdges',
+                                  'AddRemainingSelfLoops', 'by hand'])
+def test_models_refuse_operators_on_another_graph(edit):
+    # issue 39: ToUndirected after MLSOperators ran without a word
+    import torch_geometric.transforms as T
+    data = MLSOperators(k=8)(Data(pos=sphere_cloud(120, dtype=torch.float32)))
+    model = DeltaNetClassification(3, 2, k=8).eval()
+    model(data)  # untouched: accepted
+    if edit == 'by hand':
+        changed = data.clone()
+        changed.edge_index = data.edge_index.clone()
+        changed.edge_index[0, 3] = (changed.edge_index[0, 3] + 1) % 120
+    else:
+        changed = getattr(T, edit)()(data.clone())
+    with pytest.raises(ValueError, match='must run before MLSOperators'):
+        model(changed)
+
+
+def test_operator_graph_survives_batching():
+    graphs = [MLSOperators(k=6)(Data(pos=sphere_cloud(n, seed=n)))
+              for n in (50, 70)]
+    batch = Batch.from_data_list(graphs)
+    assert torch.equal(batch.operator_graph, operator_graph(
+        batch.edge_index, batch.num_nodes, batch.batch))
+    # the record follows the edges' order, not only their set
+    ei = graphs[0].edge_index
+    assert not torch.equal(operator_graph(ei, 50),
+                           operator_graph(ei[:, torch.randperm(ei.size(1))],
+                                          50))
+
+
+def test_a_cast_record_is_compared_at_its_precision():
+    # issue 39: a batch cast to bfloat16 said regularizer=0.0010004 != 0.001
+    data = Data(pos=torch.zeros(1, 3))
+    data.mls_parameters = mls_parameters(20, 1e-3, 1.0).to(torch.bfloat16)
+    check_mls_parameters(data, 20, 1e-3, 1.0)
+    with pytest.raises(ValueError, match='regularizer'):
+        check_mls_parameters(data, 20, 2e-3, 1.0)

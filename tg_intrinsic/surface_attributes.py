@@ -26,7 +26,8 @@ from tg_intrinsic.geometry.pointcloud.neighbors import knn
 
 __all__ = ['given_normals', 'computed_normals', 'resolve_normals',
            'resolve_frames', 'surface_graph', 'mls_parameters',
-           'check_mls_parameters']
+           'check_mls_parameters', 'operator_graph', 'record_operator_graph',
+           'check_operator_graph']
 
 
 def _positions(data: Data) -> Tensor:
@@ -131,8 +132,12 @@ def check_mls_parameters(data: Data, k: int, regularizer: float,
                       "they match its own: rebuild them (e.g. "
                       "force_reload=True)", UserWarning, stacklevel=3)
         return
+    # A record cast with the rest of a batch (.half(), .to(bfloat16)) is
+    # compared to the precision it kept.
+    rtol = 1e-9 if recorded.dtype == torch.float64 \
+        else 2 * torch.finfo(recorded.dtype).eps
     recorded = recorded.detach().double().cpu().reshape(-1, 4)
-    wrong = ~torch.isclose(recorded, wanted, rtol=1e-9, atol=0.0).all(1)
+    wrong = ~torch.isclose(recorded, wanted, rtol=rtol, atol=0.0).all(1)
     if bool(wrong.any()):
         got = recorded[wrong.nonzero()[0, 0]]
         raise ValueError(f"the precomputed MLS operators were built with "
@@ -141,3 +146,84 @@ def check_mls_parameters(data: Data, k: int, regularizer: float,
                          f"MLSOperators with the same values, or drop the "
                          f"precomputed operators so that the model builds "
                          f"its own")
+
+
+# Odd multipliers below 2**20 and a prime modulus below 2**31: every product
+# in operator_graph stays below 2**63, so int64 arithmetic is exact on any
+# device.
+_HASH_MULTIPLIERS = (1000003, 999983, 1000033)
+_HASH_MODULUS = 2147483647
+
+
+def operator_graph(edge_index: Tensor, num_nodes: int,
+                   batch: Optional[Tensor] = None) -> Tensor:
+    r"""The record ``[[E, h]]`` per graph of a (batched) ``edge_index``
+    that precompute transforms store beside per-edge operators (as
+    ``data.operator_graph``): the number of edges :math:`E` and a
+    fingerprint :math:`h` of the edges in their order,
+
+    .. math::
+        h = \sum_e a_e^3 \bmod p, \qquad
+        a_e = (c_1 j_e + c_2 i_e + c_3 e + 1) \bmod p,
+
+    with node indices :math:`j_e, i_e` and the position :math:`e` counted
+    from the graph's own first node and edge, so that PyG's batching keeps
+    every graph's record. Any edge added, removed, changed or moved changes
+    it (PyG's ``coalesce`` sorts the edges without their other attributes).
+
+    Shapes:
+        - **input:** edge_index :math:`(2, E)`, batch :math:`(N)`
+        - **output:** :math:`(B, 2)`, int64
+    """
+    j, i = edge_index
+    device = edge_index.device
+    if batch is None:
+        batch = torch.zeros(num_nodes, dtype=torch.long, device=device)
+    num_graphs = int(batch.max()) + 1 if batch.numel() > 0 else 1
+    node_start = torch.cumsum(torch.bincount(batch, minlength=num_graphs),
+                              0) - torch.bincount(batch, minlength=num_graphs)
+    graph = batch[i]
+    edges = torch.bincount(graph, minlength=num_graphs)
+    edge_start = torch.cumsum(edges, 0) - edges
+    position = torch.arange(i.numel(), device=device) - edge_start[graph]
+    c1, c2, c3 = _HASH_MULTIPLIERS
+    a = (c1 * (j - node_start[graph]) + c2 * (i - node_start[graph])
+         + c3 * position + 1) % _HASH_MODULUS
+    cube = (a * a % _HASH_MODULUS) * a % _HASH_MODULUS
+    fingerprint = torch.zeros(num_graphs, dtype=torch.long, device=device)
+    fingerprint = fingerprint.index_add(0, graph, cube)
+    return torch.stack([edges, fingerprint], dim=1)
+
+
+def record_operator_graph(data: Data) -> Data:
+    """Stores :func:`operator_graph` of ``data.edge_index`` as
+    ``data.operator_graph`` (``data`` is changed and returned): called by
+    every transform that writes per-edge operators."""
+    data.operator_graph = operator_graph(data.edge_index, data.num_nodes,
+                                         getattr(data, 'batch', None))
+    return data
+
+
+def check_operator_graph(data: Data, operators: str, built_by: str):
+    """Per-edge operators in ``data`` (named by ``operators``, built by the
+    transform ``built_by``) must still sit on the graph ``data.edge_index``
+    they were built on: raises a one-line :class:`ValueError` otherwise
+    (PyG's edge transforms run after the precompute). Data without a
+    record (an older version's cache) is not checked."""
+    record = getattr(data, 'operator_graph', None)
+    if record is None:
+        return
+    now = operator_graph(data.edge_index, data.num_nodes,
+                         getattr(data, 'batch', None))
+    record = record.reshape(-1, 2).to(now.device)
+    if record.shape == now.shape and torch.equal(record, now):
+        return
+    then, edges = int(record[:, 0].sum()), int(now[:, 0].sum())
+    change = f'{then} edges then, {edges} now' if then != edges \
+        else f'{edges} edges, changed or reordered'
+    raise ValueError(
+        f"the precomputed operators ({operators}) were built on another "
+        f"graph than 'data.edge_index' ({change}): "
+        f"PyG edge transforms (ToUndirected, AddSelfLoops, "
+        f"RemoveDuplicatedEdges, ...) must run before {built_by}, not "
+        f"after; or drop the operators so that the model builds its own")

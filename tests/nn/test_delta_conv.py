@@ -59,8 +59,10 @@ def reference_delta_conv(conv, x, v, edge_index, ops):
     out = conv.post_scalar(conv.lin_scalar(torch.cat(parts, 1)))
     h = conv.mlp_neighbors(x[j] - x[i]) if conv.centralized \
         else conv.mlp_neighbors(x)[j]
-    x_max = torch.full_like(out, float('-inf')).scatter_reduce(
-        0, i[:, None].expand_as(h), h, 'amax')
+    reduce = {'max': 'amax', 'min': 'amin', 'add': 'sum', 'sum': 'sum',
+              'mean': 'mean'}[conv.aggr]
+    x_max = torch.zeros_like(out).scatter_reduce(
+        0, i[:, None].expand_as(h), h, reduce, include_self=False)
     return out + x_max, (v if conv.lin_vector is not None else None)
 
 
@@ -179,3 +181,110 @@ def test_repr_shows_the_options():
     assert repr(DeltaConv(3, 8, depth=2, centralized=True, vector=False)) \
         == ('DeltaConv(3, 8, depth=2, centralized=True, vector=False, '
             'vector_input=True)')
+
+
+AGGREGATIONS = ['max', 'mean', 'add', 'sum', 'min', 'std']
+
+
+@pytest.mark.parametrize('aggr', AGGREGATIONS)
+@pytest.mark.parametrize('centralized, depth', [(False, 1), (True, 1),
+                                                (True, 2)])
+def test_every_aggr_is_honoured_on_every_path(aggr, centralized, depth):
+    # issue 39: the operators' own edge_index took the maximum whatever aggr
+    torch.manual_seed(0)
+    pos, normal = blob(120)
+    ei, ops = operators(pos, tangent_frames(normal), k=8)
+    conv = DeltaConv(3, 6, depth=depth, centralized=centralized,
+                     aggr=aggr).double().train()  # edge BN statistics too
+    x = torch.randn(120, 3, dtype=torch.float64)
+    v = ops.grad(x)
+    sparse = conv(x, v, ei, ops)
+    for other in (conv(x, v, ei.clone(), ops),
+                  conv(x, v, ei, ops, backend='message')):
+        for a, b in zip(sparse, other):
+            assert torch.allclose(a, b, rtol=1e-9, atol=1e-10)
+    if aggr != 'std':  # the oracle reduces with torch.scatter_reduce
+        conv.eval()
+        expected = reference_delta_conv(conv, x, v, ei, ops)
+        for a, b in zip(conv(x, v, ei, ops), expected):
+            assert torch.allclose(a, b, rtol=1e-9, atol=1e-10)
+
+
+def test_message_backend_needs_the_operators_graph():
+    pos, normal = blob(80)
+    ei, ops = operators(pos, tangent_frames(normal), k=6)
+    conv = DeltaConv(3, 4).double()
+    x = pos.clone()
+    shuffled = ei[:, torch.randperm(ei.size(1))]
+    with pytest.raises(ValueError, match='graph the operators were built'):
+        conv(x, ops.grad(x), shuffled, ops, backend='message')
+    with pytest.raises(ValueError, match="backend must be"):
+        conv(x, ops.grad(x), ei, ops, backend='fast')
+
+
+def test_edge_masks_and_hooks_reach_both_streams():
+    # issue 39: set_masks changed nothing, propagate hooks never fired
+    from torch_geometric.explain.algorithm.utils import (clear_masks,
+                                                         set_masks)
+    torch.manual_seed(0)
+    pos, normal = blob(100)
+    ei, ops = operators(pos, tangent_frames(normal), k=8)
+    conv = DeltaConv(3, 5).double().eval()
+    x = pos.clone()
+    v = ops.grad(x)
+    plain = conv(x, v, ei, ops)
+    ones = torch.full((ei.size(1), ), 50.0, dtype=torch.float64)
+    set_masks(conv, ones, ei, apply_sigmoid=True)  # sigmoid(50) = 1
+    for a, b in zip(conv(x, v, ei, ops), plain):
+        assert torch.allclose(a, b, atol=1e-12)
+    # masking every edge but the self-loops leaves no gradient at all
+    keep = (ei[0] == ei[1]).double() * 100 - 50
+    set_masks(conv, keep, ei, apply_sigmoid=True)
+    masked = conv(x, v, ei, ops)
+    assert (masked[1] - plain[1]).abs().max() > 1e-3
+    assert (masked[0] - plain[0]).abs().max() > 1e-3
+    clear_masks(conv)
+    calls = []
+    handle = conv.register_propagate_forward_hook(
+        lambda module, inputs, out: calls.append(out.shape))
+    hooked = conv(x, v, ei, ops)
+    handle.remove()
+    # G x, D then G for the Hodge Laplacian, D for the scalars, h2
+    assert len(calls) == 5
+    for a, b in zip(hooked, plain):
+        assert torch.allclose(a, b, rtol=1e-9, atol=1e-12)
+
+
+def test_explainer_on_a_delta_conv_model():
+    from torch_geometric.explain import Explainer, GNNExplainer
+
+    from tg_intrinsic.geometry.pointcloud import SurfaceOperators
+
+    class UserModel(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.conv1 = DeltaConv(3, 8)
+            self.conv2 = DeltaConv(8, 8, vector=False)
+            self.lin = torch.nn.Linear(8, 3)
+
+        def forward(self, x, edge_index, grad_weight, div_weight):
+            ops = SurfaceOperators(edge_index, grad_weight, div_weight,
+                                   x.size(0))
+            x, v = self.conv1(x, ops.grad(x), edge_index, ops)
+            x, _ = self.conv2(x, v, edge_index, ops)
+            return self.lin(x).amax(0, keepdim=True)
+
+    torch.manual_seed(0)
+    pos, normal = blob(90, dtype=torch.float32)
+    ei = operators(pos.double(), tangent_frames(normal.double()), k=6)[0]
+    gw, dw = (w.float() for w in
+              operators(pos.double(), tangent_frames(normal.double()),
+                        k=6)[1].source_weights)
+    explainer = Explainer(
+        UserModel().eval(), GNNExplainer(epochs=15),
+        explanation_type='model', edge_mask_type='object',
+        model_config=dict(mode='multiclass_classification',
+                          task_level='graph', return_type='raw'))
+    explanation = explainer(pos, ei, grad_weight=gw, div_weight=dw)
+    assert explanation.edge_mask.shape == (ei.size(1), )
+    assert explanation.edge_mask.std() > 1e-3

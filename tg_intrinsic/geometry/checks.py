@@ -14,6 +14,14 @@ from torch import Tensor
 FLOAT_DTYPES = (torch.float32, torch.float64)
 
 
+def compiling() -> bool:
+    """Whether the caller is being traced by ``torch.compile``: layers then
+    skip their input checks (the data is validated once, outside the
+    graph) and take gather/scatter paths instead of sparse CSR products and
+    numba sweeps, which the compiler cannot trace."""
+    return torch.compiler.is_compiling()
+
+
 def check_tensor(value, name: str) -> Tensor:
     if not isinstance(value, Tensor):
         raise ValueError(f"'{name}' must be a torch.Tensor, got "

@@ -4,11 +4,15 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 from torch_geometric.nn import MLP, MessagePassing
+from torch_geometric.nn.aggr import (MaxAggregation, MeanAggregation,
+                                     MinAggregation, SumAggregation)
+from torch_geometric.utils import scatter
 
-from tg_intrinsic.geometry.checks import (check_edge_index,
+from tg_intrinsic.geometry.checks import (check_edge_index, compiling,
                                           check_positive_int, check_rows,
                                           check_tensor, check_vector_features)
 from tg_intrinsic.geometry.pointcloud.operators import (SurfaceOperators,
+                                                        VectorCalculus,
                                                         interleaved, planar,
                                                         vector_norm)
 from tg_intrinsic.nn.sync_batch_norm import SyncBatchNorm
@@ -117,17 +121,30 @@ class DeltaConv(MessagePassing):
                 module.reset_parameters()
 
     def forward(self, x: Tensor, v: Optional[Tensor], edge_index: Tensor,
-                operators: Optional[SurfaceOperators]
+                operators: Optional[SurfaceOperators],
+                backend: Optional[str] = None
                 ) -> Tuple[Tensor, Optional[Tensor]]:
+        """``backend``: ``'sparse'`` (sparse products and dense
+        neighbour reductions), ``'message'`` (every operator as per-edge
+        messages through :meth:`propagate`, so that edge masks, explainers
+        and propagate hooks see every edge), or :obj:`None`: messages while
+        an edge mask or a hook is set, sparse otherwise. Both compute the
+        same values."""
+        if not compiling():  # validated once, outside a compiled graph
+            self._check_inputs(x, v, edge_index, operators)
+        if self._uses_messages(backend):
+            calculus = _EdgeMessages(self, edge_index, operators)
+            neighbors = self._message_neighbors
+        else:
+            calculus, neighbors = operators, self._sparse_neighbors
         c_in, c_out = self.in_channels, self.out_channels
-        self._check_inputs(x, v, edge_index, operators)
         if self.lin_vector is not None:
             # h0 on [u, J u], u = [v, G x, L_H v]: with W = [W_A, W_B],
             # W [u, J u] = W_A u + J W_B u, one product per block of u.
             weight = self.lin_vector.weight
             both = None
             for block, piece in enumerate(
-                    (v, operators.grad(x), operators.hodge_laplacian(v))):
+                    (v, calculus.grad(x), calculus.hodge_laplacian(v))):
                 cols = slice(block * c_in, (block + 1) * c_in)
                 w = torch.cat([weight[:, cols],
                                weight[:, 3 * c_in + cols.start:
@@ -146,27 +163,67 @@ class DeltaConv(MessagePassing):
             dc = F.linear(planar(v), torch.cat([
                 weight[:, c_in:c_in + c], weight[:, c_in + c:c_in + 2 * c]]))
             d, k = dc[..., :c_out], dc[..., c_out:]
-            out = out + operators.div(interleaved(torch.stack(
+            out = out + calculus.div(interleaved(torch.stack(
                 [d[0] + k[1], d[1] - k[0]])))
             out = out + F.linear(vector_norm(v), weight[:, c_in + 2 * c:])
-        out = self.post_scalar(out)
-        fast = operators is not None and \
-            edge_index is operators.source_edge_index
-        if self.centralized and fast and self.depth == 1:
-            x_max = self._centralized_max(x, operators)
-        elif self.centralized and fast:  # a per-edge MLP, then the maximum
-            j, i = operators.edge_index
-            x_max = operators.edge_max(self.mlp_neighbors(x[j] - x[i]))
-        elif self.centralized:
-            j, i = edge_index
-            x_max = self.aggr_module(self.mlp_neighbors(x[j] - x[i]), i,
-                                     dim_size=x.size(0))
-        elif fast:
-            x_max = operators.neighbor_max(self.mlp_neighbors(x))
-        else:
-            x_max = self.propagate(edge_index, x=self.mlp_neighbors(x))
-        out = out + x_max
+        out = self.post_scalar(out) + neighbors(x, edge_index, operators)
         return out, (v if self.lin_vector is not None else None)
+
+    def _uses_messages(self, backend: Optional[str]) -> bool:
+        if backend is None:
+            # PyG's explainers set an edge mask (explain=True); hooks see
+            # only what runs through propagate.
+            return bool(self.explain) or any(
+                len(hooks) > 0 for hooks in (
+                    self._propagate_forward_pre_hooks,
+                    self._propagate_forward_hooks,
+                    self._message_forward_pre_hooks,
+                    self._message_forward_hooks,
+                    self._aggregate_forward_pre_hooks,
+                    self._aggregate_forward_hooks))
+        if backend not in ('sparse', 'message'):
+            raise ValueError(f"backend must be 'sparse', 'message' or None, "
+                             f"got {backend!r}")
+        return backend == 'message'
+
+    def _sparse_neighbors(self, x: Tensor, edge_index: Tensor,
+                          operators: Optional[SurfaceOperators]) -> Tensor:
+        """:math:`\bigoplus_j h_2(x_j)` (or of :math:`h_2(x_j - x_i)`) by
+        dense or sparse reductions on the operators' graph; PyG's
+        aggregation module on any other graph or reduction."""
+        reduce = _FAST_REDUCTION.get(type(self.aggr_module))
+        fast = operators is not None and reduce is not None and (
+            edge_index is operators.source_edge_index)
+        if not fast:
+            j, i = edge_index
+            h = self.mlp_neighbors(x[j] - x[i]) if self.centralized \
+                else self.mlp_neighbors(x)[j]
+            return self.aggr_module(h, i, dim_size=x.size(0))
+        if not self.centralized:
+            return operators.neighbor_reduce(self.mlp_neighbors(x), reduce)
+        if reduce == 'max' and self.depth == 1:
+            return self._centralized_max(x, operators)
+        j, i = operators.edge_index  # a per-edge MLP, then the reduction
+        return operators.edge_reduce(self.mlp_neighbors(x[j] - x[i]), reduce)
+
+    def _message_neighbors(self, x: Tensor, edge_index: Tensor,
+                           operators: Optional[SurfaceOperators]) -> Tensor:
+        if self.centralized:
+            return self.edge_messages(edge_index, x, centre=x)
+        return self.edge_messages(edge_index, self.mlp_neighbors(x))
+
+    def edge_messages(self, edge_index: Tensor, x: Tensor,
+                      centre: Optional[Tensor] = None,
+                      grad_weight: Optional[Tensor] = None,
+                      div_weight: Optional[Tensor] = None) -> Tensor:
+        """One :meth:`propagate` over ``edge_index``: the gradient
+        (``grad_weight``), the divergence (``div_weight``) or the
+        neighbours' :math:`h_2` reduced by the layer's ``aggr``."""
+        linear = grad_weight is not None or div_weight is not None
+        # propagate_type: (x: Tensor, centre: Optional[Tensor], grad_weight: Optional[Tensor], div_weight: Optional[Tensor], linear: bool)
+        return self.propagate(edge_index, x=x, centre=centre,
+                              grad_weight=grad_weight,
+                              div_weight=div_weight, linear=linear)
 
     def _check_inputs(self, x, v, edge_index, operators):
         # Before any sparse product or numba sweep: those read out of
@@ -245,11 +302,57 @@ class DeltaConv(MessagePassing):
                               -operators.neighbor_max(-u))
         return self.mlp_neighbors.act(scale * (extreme - u) + shift)
 
-    def message(self, x_j: Tensor) -> Tensor:
+    def message(self, x_j: Tensor, centre_i: Optional[Tensor] = None,
+                grad_weight: Optional[Tensor] = None,
+                div_weight: Optional[Tensor] = None) -> Tensor:
+        # Messages stay [E, F] so that PyG's edge masks scale the edge axis.
+        if grad_weight is not None:  # G_ij x_j, planes [E, 2 * C]
+            return (grad_weight.unsqueeze(-1) * x_j.unsqueeze(1)).flatten(1)
+        if div_weight is not None:  # D_ij . v_j from planes [E, 2 * C]
+            planes = x_j.view(x_j.size(0), 2, -1)
+            return (planes * div_weight.unsqueeze(-1)).sum(1)
+        if centre_i is not None:
+            return self.mlp_neighbors(x_j - centre_i)
         return x_j
+
+    def aggregate(self, inputs: Tensor, index: Tensor,
+                  ptr: Optional[Tensor] = None,
+                  dim_size: Optional[int] = None,
+                  linear: bool = False) -> Tensor:
+        # G and D are sums over the edges whatever the layer's aggr.
+        if linear:
+            return scatter(inputs, index, 0, dim_size, reduce='sum')
+        return super().aggregate(inputs, index, ptr, dim_size)
 
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}({self.in_channels}, '
                 f'{self.out_channels}, depth={self.depth}, '
                 f'centralized={self.centralized}, vector={self.vector}, '
                 f'vector_input={self.vector_input})')
+
+
+#: PyG aggregation modules that the sparse path reduces without messages.
+_FAST_REDUCTION = {MaxAggregation: 'max', MinAggregation: 'min',
+                   SumAggregation: 'sum', MeanAggregation: 'mean'}
+
+
+class _EdgeMessages(VectorCalculus):
+    """:math:`G` and :math:`D` of a layer's operators as per-edge messages
+    through the layer's :meth:`~DeltaConv.propagate`, in the order of the
+    given ``edge_index``."""
+    def __init__(self, conv: DeltaConv, edge_index: Tensor,
+                 operators: Optional[SurfaceOperators]):
+        self.conv = conv
+        self.edge_index = edge_index
+        self.weights = None if operators is None \
+            else operators.weights_on(edge_index)
+
+    def grad(self, x: Tensor) -> Tensor:
+        out = self.conv.edge_messages(self.edge_index, x,
+                                      grad_weight=self.weights[0])
+        return interleaved(out.view(x.size(0), 2, -1).transpose(0, 1))
+
+    def div(self, v: Tensor) -> Tensor:
+        planes = planar(v).transpose(0, 1).flatten(1)  # [N, 2 * C]
+        return self.conv.edge_messages(self.edge_index, planes,
+                                       div_weight=self.weights[1])

@@ -7,6 +7,8 @@ from torch import Tensor
 from torch_geometric.nn import global_max_pool as scatter_max_pool
 from torch_geometric.utils import to_dense_batch
 
+from tg_intrinsic.geometry.checks import compiling
+
 
 class _DenseMax(torch.autograd.Function):
     """Maximum over dim 1 whose gradient is split evenly among ties (as
@@ -123,6 +125,8 @@ def global_max_pool(x: Tensor, batch: Optional[Tensor],
         - **input:** x :math:`(N, C)`, batch :math:`(N)`
         - **output:** :math:`(B, C)`
     """
+    if compiling():  # the dense sweep is numba on the CPU
+        return scatter_max_pool(x, batch, size)
     if batch is None:
         return dense_max_pool(x.unsqueeze(0))
     if batch.numel() > 1 and bool((batch[1:] < batch[:-1]).any()):

@@ -30,7 +30,7 @@ from numba import njit, prange
 from torch import Tensor
 
 from ..checks import (check_edge_index, check_float_tensor,
-                      check_positive_int, check_rows, same_device)
+                      check_positive_int, check_rows, compiling, same_device)
 from ..sparse import SparseMM
 
 # CSR matrix products are stable for what is used here (mm with a dense
@@ -131,7 +131,42 @@ def hodge_laplacian(v: Tensor, edge_index: Tensor, grad_weight: Tensor,
     return -(gd - jgdj)
 
 
-class SurfaceOperators:
+LOW_PRECISION = (torch.float16, torch.bfloat16)
+
+#: The reductions :meth:`SurfaceOperators.neighbor_reduce` computes without
+#: per-edge messages (PyG's names; ``'add'`` is ``'sum'``).
+FAST_REDUCTIONS = ('max', 'min', 'sum', 'mean')
+
+
+class VectorCalculus:
+    r"""The operators derived from a gradient :math:`G` and a divergence
+    :math:`D`: :math:`\operatorname{curl} = -DJ`, :math:`\Delta = -DG`
+    and :math:`\Delta_H = -(GD - JGDJ)`. A subclass defines :meth:`grad`
+    (``[N, C]`` -> ``[N, C, 2]``) and :meth:`div` (``[N, C, 2]`` ->
+    ``[N, C]``)."""
+    def grad(self, x: Tensor) -> Tensor:  # pragma: no cover (abstract)
+        raise NotImplementedError
+
+    def div(self, v: Tensor) -> Tensor:  # pragma: no cover (abstract)
+        raise NotImplementedError
+
+    def curl(self, v: Tensor) -> Tensor:
+        """:math:`-D J v`: ``[N, C, 2]`` -> ``[N, C]``."""
+        return -self.div(rotate_j(v))
+
+    def laplacian(self, x: Tensor) -> Tensor:
+        """:math:`-D G x`: ``[N, C]`` -> ``[N, C]``."""
+        return -self.div(self.grad(x))
+
+    def hodge_laplacian(self, v: Tensor) -> Tensor:
+        """:math:`-(G D - J G D J) v`: ``[N, C, 2]`` -> ``[N, C, 2]``."""
+        # Both terms share G: stack D v and D J v along channels.
+        c = v.size(1)
+        both = self.grad(self.div(cat_vectors([v, rotate_j(v)])))
+        return rotate_j(both[:, c:]) - both[:, :c]
+
+
+class SurfaceOperators(VectorCalculus):
     r"""Gradient and divergence of a (batched) point cloud as sparse CSR
     matrices, built once and shared by every layer of a network.
 
@@ -141,8 +176,13 @@ class SurfaceOperators:
     all four are assembled without sorting from edges grouped by centre.
     Vector fields are converted from and to ``[N, C, 2]`` at the boundary.
     The neighbour graph is kept too: when every centre has the same number
-    :math:`k` of neighbours (a k-nn graph), :meth:`neighbor_max` is a dense
-    reduction over a :math:`(N, k, C)` view.
+    :math:`k` of neighbours (a k-nn graph), :meth:`neighbor_reduce` is a
+    dense reduction over a :math:`(N, k, C)` view.
+
+    Half and bfloat16 features (``torch.autocast``, ``model.half()``) are
+    multiplied in float32 and returned in their own dtype. Traced by
+    ``torch.compile``, the products gather and scatter along the edges
+    (the same sums) instead of calling sparse kernels.
 
     Args:
         edge_index (torch.Tensor): Graph the weights live on
@@ -164,16 +204,20 @@ class SurfaceOperators:
                              ('div_weight', div_weight)):
             check_float_tensor(weight, name, (e, 2))
             same_device(weight, name, edge_index, 'edge_index')
-        self.source_edge_index = edge_index  # as given, for identity checks
+        # As given, for identity checks and for per-edge messages.
+        self.source_edge_index = edge_index
+        self.source_weights = (grad_weight, div_weight)
         j, i = edge_index
         if i.numel() > 1 and bool((i[1:] < i[:-1]).any()):
             order = torch.argsort(i, stable=True)
             j, i = j[order], i[order]
             grad_weight, div_weight = grad_weight[order], div_weight[order]
         self.edge_index = torch.stack([j, i])
+        self.grad_weight, self.div_weight = grad_weight, div_weight
         self.num_nodes = n
         count = torch.bincount(i, minlength=n)
         self.crow = _crow(count)
+        self.in_degree = count
         self.k = int(count[0]) if n > 0 and bool((count == count[0]).all()) \
             else None
         self.G = _block_rows(i, j, grad_weight, count, n)
@@ -185,32 +229,62 @@ class SurfaceOperators:
         self.out_degree = count_j
         self.D_t = _block_rows(j[by_j], i[by_j], div_weight[by_j], count_j, n)
 
+    def weights_on(self, edge_index: Tensor):
+        """``(grad_weight, div_weight)`` in the order of ``edge_index``,
+        which must be the graph the operators were built on (the same
+        tensor, or an equal one); per-edge messages read them."""
+        source = self.source_edge_index
+        if edge_index is not source and not torch.equal(edge_index, source):
+            raise ValueError(
+                "per-edge messages (an edge mask, an explainer or a "
+                "propagate hook) need 'edge_index' to be the graph the "
+                "operators were built on, edge for edge; pass the same "
+                "edge_index that built them")
+        return self.source_weights
+
     def grad(self, x: Tensor) -> Tensor:
         """:math:`G x`: ``[N, C]`` -> ``[N, C, 2]``."""
+        if compiling():
+            return grad(x, self.edge_index, self.grad_weight.to(x.dtype))
         check_rows(x, 'x', self.num_nodes, 'the operators')
-        out = SparseMM.apply(self.G, self.G_t, x)  # [2N, C]
+        out = self._product(self.G, self.G_t, x)  # [2N, C]
         return interleaved(out.view(2, self.num_nodes, -1))
 
     def div(self, v: Tensor) -> Tensor:
         """:math:`D v`: ``[N, C, 2]`` -> ``[N, C]``."""
+        if compiling():
+            return div(v, self.edge_index, self.div_weight.to(v.dtype))
         check_rows(v, 'v', self.num_nodes, 'the operators')
         flat = planar(v).reshape(2 * self.num_nodes, -1)
-        return SparseMM.apply(self.D, self.D_t, flat)
+        return self._product(self.D, self.D_t, flat)
 
-    def curl(self, v: Tensor) -> Tensor:
-        """:math:`-D J v`: ``[N, C, 2]`` -> ``[N, C]``."""
-        return -self.div(rotate_j(v))
+    @staticmethod
+    def _product(matrix: Tensor, transposed: Tensor, x: Tensor) -> Tensor:
+        # Sparse kernels exist for float32/64 only; autocast must not
+        # lower them either.
+        dtype = x.dtype
+        with torch.autocast(x.device.type, enabled=False):
+            if dtype in LOW_PRECISION:
+                x = x.float()
+            out = SparseMM.apply(matrix.to(x.dtype), transposed.to(x.dtype),
+                                 x)
+        return out.to(dtype)
 
-    def laplacian(self, x: Tensor) -> Tensor:
-        """:math:`-D G x`: ``[N, C]`` -> ``[N, C]``."""
-        return -self.div(self.grad(x))
-
-    def hodge_laplacian(self, v: Tensor) -> Tensor:
-        """:math:`-(G D - J G D J) v`: ``[N, C, 2]`` -> ``[N, C, 2]``."""
-        # Both terms share G: stack D v and D J v along channels.
-        c = v.size(1)
-        both = self.grad(self.div(cat_vectors([v, rotate_j(v)])))
-        return rotate_j(both[:, c:]) - both[:, :c]
+    def neighbor_reduce(self, x: Tensor, reduce: str = 'max') -> Tensor:
+        r"""Per centre, :math:`\bigoplus_{j \in \mathcal{N}(i)} x_j` for
+        ``reduce`` in :data:`FAST_REDUCTIONS` (0 where a point has no
+        neighbour, as PyG's aggregations)."""
+        if reduce == 'max':
+            return self.neighbor_max(x)
+        if reduce == 'min':
+            return -self.neighbor_max(-x)
+        total = self.neighbor_sum(x)
+        if reduce == 'sum':
+            return total
+        if reduce == 'mean':
+            return total / self.in_degree.clamp(min=1).to(total.dtype)[:, None]
+        raise ValueError(f"reduce must be one of {FAST_REDUCTIONS}, got "
+                         f"{reduce!r}")
 
     def neighbor_max(self, x: Tensor, backend: Optional[str] = None
                      ) -> Tensor:
@@ -218,8 +292,11 @@ class SurfaceOperators:
         point has no neighbour). The winning neighbour of every channel is
         found without autograd and then gathered, so the backward pass is a
         scatter of :math:`(N, C)` values instead of an :math:`(E, C)` mask.
-        ``backend``: ``'numba'`` (CPU) or ``'torch'``; default: numba on CPU.
+        ``backend``: ``'numba'`` (CPU) or ``'torch'``; default: numba on CPU
+        (torch when traced by ``torch.compile``).
         """
+        if compiling():
+            return self.edge_reduce(x[self.edge_index[0]], 'max')
         check_rows(x, 'x', self.num_nodes, 'the operators')
         j, i = self.edge_index
         c = x.size(1)
@@ -230,8 +307,12 @@ class SurfaceOperators:
         empty = None
         with torch.no_grad():
             if backend == 'numba':
+                # numpy has no bfloat16; the winner is found in float32
+                values = x.detach()
+                if values.dtype in LOW_PRECISION:
+                    values = values.float()
                 winner = torch.from_numpy(_neighbor_argmax(
-                    x.detach().contiguous().numpy(), self.crow.numpy(),
+                    values.contiguous().numpy(), self.crow.numpy(),
                     j.numpy()))
                 empty = winner < 0
                 winner = winner.clamp(min=0)
@@ -259,30 +340,52 @@ class SurfaceOperators:
 
     def neighbor_sum(self, x: Tensor) -> Tensor:
         r""":math:`\sum_{j \in \mathcal{N}(i)} x_j` over the graph."""
+        if compiling():
+            return self.edge_reduce(x[self.edge_index[0]], 'sum')
         check_rows(x, 'x', self.num_nodes, 'the operators')
         if not hasattr(self, 'A'):
             j = self.edge_index[0]
-            ones = torch.ones(j.numel(), dtype=x.dtype, device=x.device)
+            dtype = torch.float32 if x.dtype in LOW_PRECISION else x.dtype
+            ones = torch.ones(j.numel(), dtype=dtype, device=x.device)
             self.A = torch.sparse_csr_tensor(self.crow, j, ones,
                                              (self.num_nodes, self.num_nodes),
                                              check_invariants=False)
             self.A_t = self.A.t().to_sparse_csr()
-        return SparseMM.apply(self.A.to(x.dtype), self.A_t.to(x.dtype), x)
+        return self._product(self.A, self.A_t, x)
+
+    def edge_reduce(self, values: Tensor, reduce: str = 'max') -> Tensor:
+        r"""Per centre, the ``reduce`` (:data:`FAST_REDUCTIONS`) of per-edge
+        values given in the order of :attr:`edge_index` (0 where a point
+        has no edge)."""
+        if reduce not in FAST_REDUCTIONS:
+            raise ValueError(f"reduce must be one of {FAST_REDUCTIONS}, got "
+                             f"{reduce!r}")
+        if self.k is not None:
+            dense = values.view(self.num_nodes, self.k, -1)
+            return {'max': dense.amax, 'min': dense.amin, 'sum': dense.sum,
+                    'mean': dense.mean}[reduce](dim=1)
+        i = self.edge_index[1]
+        out = values.new_zeros(self.num_nodes, values.size(1))
+        if reduce in ('sum', 'mean'):
+            out = out.index_add(0, i, values)
+            if reduce == 'mean':
+                out = out / self.in_degree.clamp(min=1).to(out.dtype)[:, None]
+            return out
+        return out.scatter_reduce(0, i[:, None].expand_as(values), values,
+                                  'a' + reduce, include_self=False)
 
     def edge_max(self, values: Tensor) -> Tensor:
         r"""Per centre, the maximum of per-edge values given in the order of
         :attr:`edge_index` (0 where a point has no edge)."""
-        if self.k is not None:
-            return values.view(self.num_nodes, self.k, -1).amax(dim=1)
-        i = self.edge_index[1]
-        out = values.new_zeros(self.num_nodes, values.size(1))
-        return out.scatter_reduce(0, i[:, None].expand_as(values), values,
-                                  'amax', include_self=False)
+        return self.edge_reduce(values, 'max')
 
     def to(self, device) -> 'SurfaceOperators':
         for name in ('G', 'D', 'G_t', 'D_t', 'edge_index', 'crow',
-                     'out_degree'):
+                     'out_degree', 'in_degree', 'grad_weight', 'div_weight',
+                     'source_edge_index'):
             setattr(self, name, getattr(self, name).to(device))
+        self.source_weights = tuple(w.to(device)
+                                    for w in self.source_weights)
         for name in ('A', 'A_t'):  # rebuilt on demand by neighbor_sum
             self.__dict__.pop(name, None)
         return self

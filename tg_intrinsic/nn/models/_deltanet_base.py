@@ -10,17 +10,22 @@ from tg_intrinsic.geometry.pointcloud.mls import build_mls_operators
 from tg_intrinsic.geometry.pointcloud.operators import SurfaceOperators
 from tg_intrinsic.nn.delta_conv import DeltaConv
 from tg_intrinsic.surface_attributes import (check_mls_parameters,
+                                             check_operator_graph,
                                              resolve_frames)
 
 
+@torch.compiler.disable
 def operators_of(data: Data, k: int, regularizer: float, kernel_width: float
                  ) -> Tuple[Tensor, SurfaceOperators]:
     """The graph and MLS operators of a (batched) ``data``: the ones stored
     by :class:`~tg_intrinsic.transforms.MLSOperators` when present,
-    otherwise built once here on the data's device."""
+    otherwise built once here on the data's device. Always eager: the data
+    is validated here, once, and ``torch.compile`` traces the layers that
+    use the operators (one graph break)."""
     num_nodes = data.pos.size(0)
     if getattr(data, 'grad_weight', None) is not None:
         check_mls_parameters(data, k, regularizer, kernel_width)
+        check_operator_graph(data, 'grad_weight, div_weight', 'MLSOperators')
         edge_index = data.edge_index
         grad_weight, div_weight = data.grad_weight, data.div_weight
     else:
@@ -86,6 +91,17 @@ class DeltaNetBase(torch.nn.Module):
                         else None)
             out.append(x)
         return out
+
+
+def graph_batch(data: Data, x: Tensor) -> Tuple[Tensor, int]:
+    """The example index of every point and the number of examples (from
+    a :class:`~torch_geometric.data.Batch`'s own count where it has one,
+    so that ``torch.compile`` reads no tensor value)."""
+    batch = getattr(data, 'batch', None)
+    if batch is None:
+        return torch.zeros(x.size(0), dtype=torch.long, device=x.device), 1
+    size = getattr(data, 'num_graphs', None)
+    return batch, int(batch.max()) + 1 if size is None else size
 
 
 def category_one_hot(category: Optional[Tensor], num_categories: int,

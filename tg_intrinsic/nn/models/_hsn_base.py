@@ -10,6 +10,7 @@ from tg_intrinsic.nn.harmonic_resnet_block import (COMPLEX_NORMS,
                                                    DEFAULT_COMPLEX_NORM,
                                                    harmonic_operators,
                                                    norm_repr)
+from tg_intrinsic.surface_attributes import check_operator_graph
 
 
 class HSNBase(torch.nn.Module):
@@ -56,6 +57,8 @@ def level_operators(data: Data, level: int, num_nodes: int,
         raise ValueError(f"the data lacks {missing}; build it with LogMap, "
                          f"ParallelTransport, MultiscaleSupports and "
                          f"HarmonicPrecompute (see HSNClassification)")
+    if level == 0:  # PyG's edge transforms act on level 0 only
+        check_operator_graph(data, 'logmap, transport, harmonic', 'LogMap')
     return harmonic_operators(
         data[level_key('edge_index', level)],
         data[level_key('harmonic', level)],

@@ -13,6 +13,7 @@ from tg_intrinsic.nn.vector_linear import VectorLinear
 from tg_intrinsic.pool.gravo_pool import GravoPool
 from tg_intrinsic.pool.gravo_unpool import GravoUnpool
 from tg_intrinsic.pool.tangent_vector_pool import TangentVectorPool
+from tg_intrinsic.surface_attributes import check_operator_graph
 from tg_intrinsic.transforms.pooling_levels import METHODS
 
 NUM_SCALES = 4
@@ -268,6 +269,8 @@ class DeltaUResNet(torch.nn.Module):
                              f"{sorted(methods)}, but this model pools with "
                              f"{self.pooling!r}; build them with "
                              f"PoolingLevels(method={self.pooling!r})")
+        check_operator_graph(data, 'grad_weight, div_weight',
+                             'PoolingLevels')
         return [_Level(data, level) for level in range(NUM_SCALES)]
 
     def __repr__(self) -> str:

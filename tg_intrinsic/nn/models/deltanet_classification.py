@@ -5,11 +5,11 @@ from torch import Tensor
 from torch_geometric.data import Data
 from torch_geometric.nn import global_mean_pool
 
-from tg_intrinsic.geometry.checks import check_positive_int
+from tg_intrinsic.geometry.checks import check_positive_int, compiling
 from tg_intrinsic.nn.delta_conv import scalar_mlp
 from tg_intrinsic.pool.global_max_pool import (dense_max_pool,
                                                global_max_pool)
-from tg_intrinsic.nn.models._deltanet_base import DeltaNetBase
+from tg_intrinsic.nn.models._deltanet_base import DeltaNetBase, graph_batch
 from tg_intrinsic.nn.models._embedding_pool import can_fuse, embed_and_pool
 
 
@@ -86,12 +86,10 @@ class DeltaNetClassification(torch.nn.Module):
 
     def forward(self, data: Data) -> Tensor:
         x = torch.cat(self.base(data), dim=1)
-        batch = getattr(data, 'batch', None)
-        if batch is None:
-            batch = torch.zeros(x.size(0), dtype=torch.long, device=x.device)
-        size = int(batch.max()) + 1
+        batch, size = graph_batch(data, x)
         count = x.size(0) // size
-        if x.size(0) == size * count and bool(
+        # the fused CPU sweep is numba: compiled graphs take the plain path
+        if not compiling() and x.size(0) == size * count and bool(
                 (torch.bincount(batch, minlength=size) == count).all()):
             pooled = self._embed_and_pool_equal(x, size, count)
         else:

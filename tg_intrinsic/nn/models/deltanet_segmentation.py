@@ -7,7 +7,7 @@ from torch_geometric.data import Data
 from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.nn.delta_conv import scalar_mlp
 from tg_intrinsic.pool.global_max_pool import global_max_pool
-from tg_intrinsic.nn.models._deltanet_base import (DeltaNetBase,
+from tg_intrinsic.nn.models._deltanet_base import (DeltaNetBase, graph_batch,
                                                    category_one_hot)
 
 
@@ -94,10 +94,7 @@ class DeltaNetSegmentation(torch.nn.Module):
     def forward(self, data: Data) -> Tensor:
         conv_out = self.base(data)
         x = self.embedding(torch.cat(conv_out, dim=1))
-        batch = getattr(data, 'batch', None)
-        if batch is None:
-            batch = torch.zeros(x.size(0), dtype=torch.long, device=x.device)
-        size = int(batch.max()) + 1
+        batch, size = graph_batch(data, x)
         parts = [global_max_pool(x, batch, size)[batch]]
         if self.category is not None:
             category = category_one_hot(getattr(data, 'category', None),

@@ -7,6 +7,7 @@ Every command's ``--device`` and the training loop go through
 device always carries its index (``cuda:0``, or ``cuda:LOCAL_RANK`` under
 ``torchrun``), which :func:`torch.cuda.set_device` needs.
 """
+import contextlib
 import os
 from typing import Optional
 
@@ -14,6 +15,7 @@ import torch
 
 __all__ = [
     'resolve_device', 'check_device', 'local_rank', 'default_threads',
+    'PRECISIONS', 'check_precision', 'autocast',
 ]
 
 ACCEPTED = "auto, cpu, cuda, cuda:N (N a GPU's index) or mps"
@@ -89,3 +91,30 @@ def default_threads(environ=None) -> int:
         cores = os.cpu_count() or 1
     sharing = int(environ.get('LOCAL_WORLD_SIZE') or 1)
     return max(1, cores // max(1, sharing))
+
+
+#: Training precisions, named as Lightning names them: float32 throughout,
+#: or ``torch.autocast`` to bfloat16 / float16 (with gradient scaling). The
+#: layers run their sparse and complex maths in float32 inside either.
+PRECISIONS = ('32-true', 'bf16-mixed', '16-mixed')
+
+
+def check_precision(precision: str, device: torch.device) -> None:
+    """``precision`` must be one of :data:`PRECISIONS` that ``device`` can
+    run: float16 autocast with gradient scaling is a CUDA feature."""
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {', '.join(PRECISIONS)}, "
+                         f"got {precision!r}")
+    if precision == '16-mixed' and device.type != 'cuda':
+        raise ValueError(f"precision 16-mixed needs a CUDA device (float16 "
+                         f"gradients need scaling there), but the device is "
+                         f"{device}; use bf16-mixed on {device.type}")
+
+
+def autocast(precision: str, device: torch.device):
+    """The context in which a model runs at ``precision``: nothing for
+    ``'32-true'``, else ``torch.autocast`` to bfloat16 or float16."""
+    if precision == '32-true':
+        return contextlib.nullcontext()
+    dtype = torch.bfloat16 if precision == 'bf16-mixed' else torch.float16
+    return torch.autocast(device.type, dtype=dtype)

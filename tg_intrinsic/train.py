@@ -110,7 +110,8 @@ from torch_geometric.transforms import Compose, NormalizeScale, RandomScale
 from tqdm import tqdm
 
 from tg_intrinsic import distributed
-from tg_intrinsic.devices import check_device, default_threads
+from tg_intrinsic.devices import (PRECISIONS, autocast, check_device,
+                                  check_precision, default_threads)
 from tg_intrinsic.cli.common import UsageError, one_line
 from tg_intrinsic.io.figures import save_figure
 from tg_intrinsic.io.results import (RECORD, check_output_path, claim_folder,
@@ -552,7 +553,8 @@ def instance_miou(pred: torch.Tensor, y: torch.Tensor,
 
 @torch.no_grad()
 def evaluate(model, loader, device, part_mask=None,
-             statistics: str = 'running') -> Dict:
+             statistics: str = 'running', precision: str = '32-true'
+             ) -> Dict:
     """Accuracy over shapes (classification) or points (segmentation); with
     a category-to-parts :obj:`part_mask` also the instance-averaged mIoU.
     In a data-parallel run every process scores its part of the test set
@@ -560,7 +562,8 @@ def evaluate(model, loader, device, part_mask=None,
     :obj:`statistics` is ``'running'`` (``model.eval()``, what inference
     gives) or ``'batch'`` (batch norms normalise with each test batch's own
     statistics, on a copy of the model: see
-    :func:`batch_statistics_copy`)."""
+    :func:`batch_statistics_copy`); :obj:`precision` that of training
+    (:data:`~tg_intrinsic.devices.PRECISIONS`)."""
     if statistics == 'batch':
         model = batch_statistics_copy(model)
     else:
@@ -569,7 +572,8 @@ def evaluate(model, loader, device, part_mask=None,
     ious = []
     for batch in loader:
         batch = batch.to(device)
-        pred = model(batch).argmax(dim=-1)
+        with autocast(precision, device):
+            pred = model(batch).argmax(dim=-1)
         correct += int((pred == batch.y.view(-1)).sum())
         total += pred.numel()
         if part_mask is not None:
@@ -673,7 +677,7 @@ OUTPUT_FILES = (CHECKPOINT, 'metrics.json', 'metrics.csv',
 # always give other values.
 RESUME_FREE = ('quiet', 'workers', 'threads', 'device', 'backend', 'on_disk',
                'force_reload', 'root', 'out', 'resume', 'allow_changes',
-               'overwrite', 'debug', 'command')
+               'overwrite', 'debug', 'command', 'compile')
 # Settings that change how a resumed run goes on but not what its
 # checkpoint holds: they may differ with --allow-changes.
 RESUME_CHANGEABLE = ('epochs', 'eval_every', 'sync_batch_norm', 'mesh_root')
@@ -684,7 +688,9 @@ HSN_ONLY = ('hsn_channels', 'max_order', 'rings', 'hsn_norm', 'radius',
             'resample_vertices', 'logmap_method')
 # The value of a setting that older checkpoints lack but that is known:
 # before --hsn-norm, HSN trained with batch norm.
-OLD_DEFAULTS = {'hsn': {'hsn_norm': 'batch'}}
+# Before --precision, every run trained in float32.
+OLD_DEFAULTS = {'hsn': {'hsn_norm': 'batch', 'precision': '32-true'},
+                'deltanet': {'precision': '32-true'}}
 
 
 def _option(name: str, args) -> str:
@@ -944,6 +950,10 @@ def train(args) -> Dict:
     process or, under ``torchrun``, on every process of the run."""
     device, started = distributed.start(args.backend, args.device)
     try:
+        try:
+            check_precision(args.precision, device)
+        except ValueError as error:
+            raise UsageError(str(error)) from None
         # before the data are prepared (minutes): rank 0 checks --out and
         # reads the checkpoint, which every process then gets (no shared
         # file system needed)
@@ -1046,6 +1056,11 @@ def _train(args, device, state: Optional[Dict]) -> Dict:
     if world > 1:
         net = torch.nn.parallel.DistributedDataParallel(
             model, device_ids=None if device.type == 'cpu' else [device])
+    if args.compile:  # shapes vary by batch: one graph for all of them
+        net = torch.compile(net, dynamic=True)
+    # float16 gradients underflow without scaling; a no-op otherwise
+    scaler = torch.amp.GradScaler(device.type,
+                                  enabled=args.precision == '16-mixed')
     # the test set: a contiguous part on every process, scores summed
     test_loader = DataLoader(
         [test_items[i] for i in distributed.shard(
@@ -1088,10 +1103,11 @@ def _train(args, device, state: Optional[Dict]) -> Dict:
             for batch in bar:
                 batch = batch.to(device)
                 optimizer.zero_grad()
-                out = net(batch)
+                with autocast(args.precision, device):
+                    out = net(batch)
                 target = batch.y.view(-1)
                 loss_sum = F.cross_entropy(
-                    out, target, reduction='sum',
+                    out.float(), target, reduction='sum',
                     label_smoothing=args.label_smoothing)
                 # [count, loss sum, correct] of the global batch
                 step = distributed.all_reduce_sum(torch.stack([
@@ -1108,8 +1124,9 @@ def _train(args, device, state: Optional[Dict]) -> Dict:
                 # the mean over the global batch: DDP averages the
                 # gradients over the processes, so each one scales its sum
                 # by world / n
-                (loss_sum * (world / float(step[0]))).backward()
-                optimizer.step()
+                scaler.scale(loss_sum * (world / float(step[0]))).backward()
+                scaler.step(optimizer)
+                scaler.update()
                 totals += step
                 bar.set_postfix(loss=f'{float(totals[1] / totals[0]):.3f}')
         schedule.step()
@@ -1127,7 +1144,8 @@ def _train(args, device, state: Optional[Dict]) -> Dict:
             # equal on every process after the recalibration; rank 0's
             # otherwise (per-process batch norm), as saved
             distributed.broadcast_buffers(model)
-            scores = evaluate(model, test_loader, device, part_mask)
+            scores = evaluate(model, test_loader, device, part_mask,
+                              precision=args.precision)
             record['test_accuracy'] = scores['accuracy']
             if 'miou' in scores:
                 record['test_miou'] = scores['miou']
@@ -1139,7 +1157,7 @@ def _train(args, device, state: Optional[Dict]) -> Dict:
             elif shuffled_test_loader is not None:
                 record['test_accuracy_batch_statistics'] = evaluate(
                     model, shuffled_test_loader, device, part_mask,
-                    statistics='batch')['accuracy']
+                    statistics='batch', precision=args.precision)['accuracy']
         history.append(record)
         if not main_process:
             continue
@@ -1316,6 +1334,14 @@ def add_arguments(parser, model_and_dataset: bool = True):
         help='auto (cuda when PyTorch finds a GPU, else cpu), cpu, cuda, '
         'cuda:N or mps (default: auto)')
     add('--threads', type=int, default=0)
+    add('--compile', action='store_true',
+        help='train with torch.compile(dynamic=True): the same results '
+        'within float rounding, faster once compiled (the first batches '
+        'compile)')
+    add('--precision', default='32-true', choices=PRECISIONS,
+        help='32-true (float32), bf16-mixed (autocast to bfloat16) or '
+        '16-mixed (float16 with gradient scaling, CUDA only); sparse and '
+        'complex maths stay float32 (default: 32-true)')
     add('--resume', action='store_true',
         help='continue from the checkpoint in --out (written by any number '
         'of processes) with the settings it was trained with, checked '

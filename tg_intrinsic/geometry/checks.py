@@ -4,6 +4,11 @@ Every public function, transform, layer and solver calls these before doing
 any maths, so that malformed input fails with a :class:`ValueError` that
 names the argument, says what is wrong and what to do, instead of producing
 NaNs further down. One check per kind of value, decided here only.
+
+Inside a graph traced by ``torch.compile`` the checks of tensor *values*
+(finite, in range, sorted) are skipped: they would break the graph at
+every call, and the models validate their data once, eagerly, before the
+compiled layers run. Checks of shapes and dtypes always run.
 """
 from typing import Optional, Sequence, Tuple
 
@@ -45,7 +50,8 @@ def check_points(pos, name: str = 'pos', dim: Optional[int] = 3,
     if pos.size(0) < min_points:
         raise ValueError(f"'{name}' has {pos.size(0)} points but at least "
                          f"{min_points} are needed")
-    if pos.numel() > 0 and not bool(torch.isfinite(pos).all()):
+    if pos.numel() > 0 and not compiling() \
+            and not bool(torch.isfinite(pos).all()):
         bad = (~torch.isfinite(pos)).any(dim=1).nonzero().flatten()
         raise ValueError(f"'{name}' contains NaN or infinite values at "
                          f"{bad.numel()} row(s) (first: {bad[:5].tolist()}); "
@@ -81,7 +87,7 @@ def check_batch(batch, num_points: int, ref: Tensor) -> Optional[Tensor]:
     if batch.dtype != torch.long:
         raise ValueError(f"'batch' must be torch.long, got {batch.dtype}")
     same_device(batch, 'batch', ref)
-    if num_points > 0:
+    if num_points > 0 and not compiling():
         if int(batch.min()) < 0:
             raise ValueError("'batch' contains negative example indices")
         if num_points > 1 and bool((batch[1:] < batch[:-1]).any()):
@@ -247,7 +253,7 @@ def _check_pairs(index, name: str, size: str) -> Tensor:
 
 def _check_range(index: Tensor, name: str, num: Optional[int], what: str):
     # Compiled and sparse kernels read out of bounds on such indices.
-    if index.numel() == 0:
+    if index.numel() == 0 or compiling():
         return
     lo, hi = int(index.min()), int(index.max())
     if num is not None and (lo < 0 or hi >= num):
@@ -306,7 +312,8 @@ def check_float_tensor(value, name: str, shape: Sequence[int]) -> Tensor:
     if not value.is_floating_point():
         raise ValueError(f"'{name}' must be a float tensor, got "
                          f"{value.dtype}")
-    if value.numel() and not bool(torch.isfinite(value).all()):
+    if value.numel() and not compiling() \
+            and not bool(torch.isfinite(value).all()):
         raise ValueError(f"'{name}' contains NaN or infinite values; "
                          f"repair those rows first")
     return value

@@ -5,6 +5,8 @@ from torch import Tensor
 from torch.nn import Parameter
 
 from tg_intrinsic.geometry.checks import check_positive_int, check_streams
+from tg_intrinsic.geometry.precision import (complex_from, full_precision,
+                                             refuse_low_precision)
 
 
 class ComplexLinear(torch.nn.Module):
@@ -51,10 +53,12 @@ class ComplexLinear(torch.nn.Module):
 
     def forward(self, z: Tensor) -> Tensor:
         check_streams(z, 'z')
+        refuse_low_precision(self.weight, 'weights', 'ComplexLinear')
         if z.size(-1) != self.in_channels:
             raise ValueError(f"expected complex features [N, streams, "
                              f"{self.in_channels}], got {list(z.shape)}")
-        out = torch.complex(z.real @ self.weight, z.imag @ self.weight)
+        with full_precision(z.device.type):  # complex maths in float32
+            out = complex_from(z.real @ self.weight, z.imag @ self.weight)
         if self.bias is None:
             return out
         first = out[:, :1] + self.bias

@@ -9,6 +9,8 @@ from torch_geometric.nn import MessagePassing
 from tg_intrinsic.geometry.checks import (check_edge_index,
                                           check_positive_int, check_rows,
                                           check_tensor)
+from tg_intrinsic.geometry.precision import (complex_from,
+                                             refuse_low_precision)
 from tg_intrinsic.geometry.geodesics.harmonic import (HarmonicOperator,
                                                       check_harmonic_graph)
 
@@ -126,6 +128,11 @@ class HarmonicConv(MessagePassing):
         """Pass either the disc graph with its precomputed ``harmonic`` and
         ``transport``, or an ``operator`` built once on them and shared by
         several layers."""
+        refuse_low_precision(self.radial, 'weights', 'HarmonicConv')
+        for name, value in (('harmonic', harmonic),
+                            ('transport', transport)):
+            if value is not None and not value.is_complex():
+                refuse_low_precision(value, f"'{name}'", 'HarmonicConv')
         x = self._complex_input(x)
         if backend == 'sparse' and operator is not None:
             if not isinstance(operator, HarmonicOperator):
@@ -188,7 +195,7 @@ class HarmonicConv(MessagePassing):
         if not x.is_complex():
             if x.dim() != 2:
                 raise ValueError("real input must be [N, C] (stream 0)")
-            x = torch.complex(x, torch.zeros_like(x)).unsqueeze(1)
+            x = complex_from(x).unsqueeze(1)
         if x.dim() != 3 or x.size(1) != self.prev_order + 1 \
                 or x.size(2) != self.in_channels:
             raise ValueError(f"expected features [N, {self.prev_order + 1}, "

@@ -55,8 +55,10 @@ class ParallelTransportPool(torch.nn.Module):
         out = moved.new_zeros((num_clusters,) + tuple(x.shape[1:]))
         out = out.index_add(0, cluster, moved)
         if self.reduce == 'mean':
-            count = torch.bincount(cluster, minlength=num_clusters)
-            out = out / count.clamp(min=1).view(-1, 1, 1).to(out.real.dtype)
+            # index_add, not bincount: its size is known to torch.compile
+            count = out.real.new_zeros(num_clusters).index_add(
+                0, cluster, out.real.new_ones(n))
+            out = out / count.clamp(min=1).view(-1, 1, 1)
         return out
 
     def __repr__(self) -> str:

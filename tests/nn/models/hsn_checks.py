@@ -115,3 +115,28 @@ def check_norm_is_validated(make_model):
     with pytest.raises(ValueError, match=r"'norm' must be one of "
                        r"\('instance', 'batch', None\), got 'layer'"):
         make_model('layer')
+
+
+def single_precision(data):
+    return data.apply(lambda t: t.float() if t.is_floating_point() else
+                      t.to(torch.complex64) if t.is_complex() else t)
+
+
+def check_compile_and_precision(model_class, backend='aot_eager'):
+    """torch.compile (one graph for batches of every size, as eager),
+    bfloat16 autocast close to float32, and half weights refused in words
+    (complex maths has no half kernels)."""
+    from tests.nn.models.machinery_checks import (check_autocast,
+                                                  check_compiles)
+    torch.manual_seed(0)
+    batches = [Batch.from_data_list([two_level_data(s, n=n, n1=n1)
+                                     for s in range(count)])
+               for count, n, n1 in ((3, 50, 12), (2, 60, 15), (4, 40, 10))]
+    model = model_class(3, 5, channels=(4, 6), rings=RINGS).double()
+    check_compiles(model, batches, backend=backend, rtol=1e-9)
+    model = model_class(3, 5, channels=(4, 6), rings=RINGS)
+    check_autocast(model, single_precision(batches[0]))
+    half = single_precision(batches[0]).apply(
+        lambda t: t.half() if t.is_floating_point() else t)
+    with pytest.raises(ValueError, match='torch.autocast'):
+        model.half()(half)

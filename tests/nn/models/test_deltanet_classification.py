@@ -10,6 +10,7 @@ from torch_geometric.nn import global_max_pool, global_mean_pool
 
 from tg_intrinsic.nn.models import DeltaNetClassification
 from tests.nn.conftest import make_batch
+from tests.nn.models.machinery_checks import check_autocast, check_compiles
 from tests.symmetry import rotate_frames
 
 
@@ -149,13 +150,17 @@ def test_deltanet_coordinate_independence():
     assert not torch.allclose(out1, model.eval()(batch))
 
 
-def test_torch_compile_matches_eager():
+def test_torch_compile_matches_eager_without_recompiling():
+    torch.manual_seed(0)
+    batches = [Batch.from_data_list(make_batch(sizes, dtype=torch.float32))
+               for sizes in ((200, 260, 230), (150, 180), (220, 240, 210))]
+    check_compiles(DeltaNetClassification(3, 4, k=12), batches)
+
+
+def test_bfloat16_autocast():
     torch.manual_seed(0)
     batch = Batch.from_data_list(make_batch(dtype=torch.float32))
-    model = DeltaNetClassification(3, 4, k=12).eval()
-    eager = model(batch)
-    compiled = torch.compile(model)
-    assert torch.allclose(compiled(batch), eager, atol=1e-5)
+    check_autocast(DeltaNetClassification(3, 4, k=12), batch)
 
 
 def test_missing_points_and_bad_data():

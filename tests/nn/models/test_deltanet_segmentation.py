@@ -8,6 +8,7 @@ from torch_geometric.data import Batch, Data
 from tg_intrinsic.nn.models import DeltaNetSegmentation
 from tg_intrinsic.transforms import MLSOperators
 from tests.nn.conftest import make_batch
+from tests.nn.models.machinery_checks import check_autocast, check_compiles
 
 
 def test_deltanet_batched_equals_per_example():
@@ -133,3 +134,24 @@ def test_bad_categories_are_explained(category, match):
         data.category = category
     with pytest.raises(ValueError, match=match):
         model(Batch.from_data_list(data_list))
+
+
+def test_torch_compile_with_precomputed_operators():
+    # MLSOperators' weights read from the batch (the training path), with
+    # categories; aot_eager traces what inductor would compile
+    torch.manual_seed(0)
+    batches = []
+    for sizes in ((120, 150), (100, 130, 90)):
+        items = [MLSOperators(k=10)(data) for data in
+                 make_batch(sizes, dtype=torch.float32)]
+        for index, item in enumerate(items):
+            item.category = torch.tensor([index % 2])
+        batches.append(Batch.from_data_list(items))
+    model = DeltaNetSegmentation(3, 5, k=10, num_categories=2)
+    check_compiles(model, batches, backend='aot_eager')
+
+
+def test_bfloat16_autocast():
+    torch.manual_seed(0)
+    batch = Batch.from_data_list(make_batch(dtype=torch.float32))
+    check_autocast(DeltaNetSegmentation(3, 5, k=12), batch)

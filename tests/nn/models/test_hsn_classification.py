@@ -2,7 +2,8 @@ import pytest
 import torch
 
 from tg_intrinsic.nn.models import HSNClassification
-from tests.nn.models.hsn_checks import (MISSING_LEVELS,
+from tests.nn.models.hsn_checks import (check_compile_and_precision,
+                                        MISSING_LEVELS,
                                         check_batched_equals_per_example,
                                         check_constructors_need_positive_sizes,
                                         check_gauge_invariance,
@@ -88,3 +89,7 @@ def test_norm_is_validated_and_per_mesh_by_default():
     check_norm_is_validated(make)
     assert make().norm == 'instance'
     assert make(None).norm is None
+
+
+def test_compile_and_mixed_precision():
+    check_compile_and_precision(HSNClassification, backend='inductor')

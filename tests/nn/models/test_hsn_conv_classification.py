@@ -7,7 +7,8 @@ from torch_geometric.data import Batch
 from tg_intrinsic.nn.models import HSNConvClassification
 from tests.conftest import rel
 from tests.nn.conftest import RINGS, two_level_data
-from tests.nn.models.hsn_checks import (MISSING_LEVELS,
+from tests.nn.models.hsn_checks import (check_compile_and_precision,
+                                        MISSING_LEVELS,
                                         check_batched_equals_per_example,
                                         check_gauge_invariance,
                                         check_missing_level_is_explained,
@@ -131,3 +132,7 @@ def test_norm_is_validated_and_batch_norm_by_default():
     check_norm_is_validated(make)
     assert make().norm == 'batch'
     assert make(None).norm is None
+
+
+def test_compile_and_mixed_precision():
+    check_compile_and_precision(HSNConvClassification)

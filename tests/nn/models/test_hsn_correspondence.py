@@ -4,7 +4,8 @@ import torch
 from tg_intrinsic.nn.models import HSNCorrespondence
 from tests.conftest import rel
 from tests.nn.conftest import RINGS, two_level_data
-from tests.nn.models.hsn_checks import (check_norm_is_validated,
+from tests.nn.models.hsn_checks import (check_compile_and_precision,
+                                        check_norm_is_validated,
                                         check_training_equals_evaluation)
 
 
@@ -88,3 +89,7 @@ def test_norm_is_validated_and_per_mesh_by_default():
     check_norm_is_validated(make)
     assert make().backbone.norm == 'instance'
     assert make(None).backbone.norm is None
+
+
+def test_compile_and_mixed_precision():
+    check_compile_and_precision(HSNCorrespondence)

@@ -12,7 +12,8 @@ from tg_intrinsic.transforms import (HarmonicPrecompute, LogMap,
                                      MultiscaleSupports)
 from tests.conftest import grid_mesh, rel
 from tests.nn.conftest import RINGS, disc_graph, two_level_data
-from tests.nn.models.hsn_checks import (check_norm_is_validated,
+from tests.nn.models.hsn_checks import (check_compile_and_precision,
+                                        check_norm_is_validated,
                                         check_training_equals_evaluation)
 from tests.symmetry import gauge_change, rotate_frames
 
@@ -256,3 +257,7 @@ def test_norm_is_validated_and_per_mesh_by_default():
     check_norm_is_validated(make)
     assert make().norm == 'instance'
     assert make(None).norm is None
+
+
+def test_compile_and_mixed_precision():
+    check_compile_and_precision(HSNUResNet)

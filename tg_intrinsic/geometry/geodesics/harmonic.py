@@ -32,10 +32,11 @@ from typing import Optional
 import torch
 from torch import Tensor
 
-from ..checks import (check_edge_index, check_float_tensor,
+from ..checks import (check_edge_index, check_float_tensor, compiling,
                       check_positive_float, check_positive_int, check_rows,
                       check_tensor, same_device)
 # A^H is what complex autograd needs in the backward pass.
+from ..precision import at_least_float32
 from ..sparse import SparseMM
 
 
@@ -214,6 +215,7 @@ class HarmonicOperator:
         if layout is None:
             layout = harmonic_layout(edge_index, harmonic, n)
         edge, ring, src, bucket, rank, count, rank_j, count_j = layout
+        transport = at_least_float32(transport)  # complex maths in float32
         src_order = torch.arange(in_orders, device=src.device)
         dst_order = torch.arange(out_orders, device=src.device)
         m = dst_order.view(1, -1) - src_order.view(-1, 1)  # [P+1, O+1]
@@ -233,6 +235,10 @@ class HarmonicOperator:
         slot = crow[row] + rank.view(-1, 1, 1)
         shape = (n * q_count * p * o, n * p)
         self.matrix = _scatter_csr(crow, slot, col, values, shape)
+        # the same entries as coordinates, for graphs traced by
+        # torch.compile (which cannot hold sparse tensors)
+        self.entries = (row.reshape(-1), col.reshape(-1),
+                        values.reshape(-1))
         # A^H: row (j, M) holds the entries of source j for every M'.
         crow_t = _crow((count_j * o).repeat_interleave(p))
         slot_t = crow_t[src.view(-1, 1, 1) * p + m_in] \
@@ -245,7 +251,14 @@ class HarmonicOperator:
         check_rows(x, 'x', self.num_nodes, 'the operator')
         c = x.size(-1)
         flat = x.reshape(self.num_nodes * self.in_orders, c)
-        out = SparseMM.apply(self.matrix, self.adjoint, flat)
+        if compiling():  # gather and scatter the same products
+            row, col, value = self.entries
+            rows = self.num_nodes * self.rings * self.in_orders \
+                * self.out_orders
+            out = flat.new_zeros(rows, c).index_add(
+                0, row, value.unsqueeze(1) * flat[col])
+        else:
+            out = SparseMM.apply(self.matrix, self.adjoint, flat)
         return out.view(self.num_nodes, self.rings, self.in_orders,
                         self.out_orders, c)
 
@@ -304,6 +317,7 @@ def transport_features(x: Tensor, angle: Tensor) -> Tensor:
         - **input:** x :math:`(N, P + 1, C)` complex, angle :math:`(N)`
         - **output:** :math:`(N, P + 1, C)`
     """
+    angle = at_least_float32(angle)  # complex maths in float32
     orders = torch.arange(x.size(1), device=x.device, dtype=angle.dtype)
     spin = torch.polar(torch.ones_like(angle).unsqueeze(1),
                        angle.unsqueeze(1) * orders)

@@ -31,6 +31,7 @@ from torch import Tensor
 
 from ..checks import (check_edge_index, check_float_tensor,
                       check_positive_int, check_rows, compiling, same_device)
+from ..precision import LOW_PRECISION, full_precision
 from ..sparse import SparseMM
 
 # CSR matrix products are stable for what is used here (mm with a dense
@@ -130,8 +131,6 @@ def hodge_laplacian(v: Tensor, edge_index: Tensor, grad_weight: Tensor,
                          edge_index, grad_weight))
     return -(gd - jgdj)
 
-
-LOW_PRECISION = (torch.float16, torch.bfloat16)
 
 #: The reductions :meth:`SurfaceOperators.neighbor_reduce` computes without
 #: per-edge messages (PyG's names; ``'add'`` is ``'sum'``).
@@ -263,7 +262,7 @@ class SurfaceOperators(VectorCalculus):
         # Sparse kernels exist for float32/64 only; autocast must not
         # lower them either.
         dtype = x.dtype
-        with torch.autocast(x.device.type, enabled=False):
+        with full_precision(x.device.type):
             if dtype in LOW_PRECISION:
                 x = x.float()
             out = SparseMM.apply(matrix.to(x.dtype), transposed.to(x.dtype),

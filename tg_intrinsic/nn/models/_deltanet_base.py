@@ -8,6 +8,7 @@ from tg_intrinsic.geometry.checks import (check_channels, check_index,
                                           check_positive_int, check_tensor)
 from tg_intrinsic.geometry.pointcloud.mls import build_mls_operators
 from tg_intrinsic.geometry.pointcloud.operators import SurfaceOperators
+from tg_intrinsic.geometry.precision import full_precision
 from tg_intrinsic.nn.delta_conv import DeltaConv
 from tg_intrinsic.surface_attributes import (check_mls_parameters,
                                              check_operator_graph,
@@ -19,9 +20,10 @@ def operators_of(data: Data, k: int, regularizer: float, kernel_width: float
                  ) -> Tuple[Tensor, SurfaceOperators]:
     """The graph and MLS operators of a (batched) ``data``: the ones stored
     by :class:`~tg_intrinsic.transforms.MLSOperators` when present,
-    otherwise built once here on the data's device. Always eager: the data
-    is validated here, once, and ``torch.compile`` traces the layers that
-    use the operators (one graph break)."""
+    otherwise built once here on the data's device. Always eager and in
+    full precision (autocast off): the data is validated here, once, and
+    ``torch.compile`` traces the layers that use the operators (one graph
+    break)."""
     num_nodes = data.pos.size(0)
     if getattr(data, 'grad_weight', None) is not None:
         check_mls_parameters(data, k, regularizer, kernel_width)
@@ -29,10 +31,11 @@ def operators_of(data: Data, k: int, regularizer: float, kernel_width: float
         edge_index = data.edge_index
         grad_weight, div_weight = data.grad_weight, data.div_weight
     else:
-        edge_index, _, grad_weight, div_weight = build_mls_operators(
-            data.pos, k, getattr(data, 'batch', None),
-            frame=resolve_frames(data), kernel_width=kernel_width,
-            regularizer=regularizer)
+        with full_precision(data.pos.device.type):
+            edge_index, _, grad_weight, div_weight = build_mls_operators(
+                data.pos, k, getattr(data, 'batch', None),
+                frame=resolve_frames(data), kernel_width=kernel_width,
+                regularizer=regularizer)
     return edge_index, SurfaceOperators(edge_index, grad_weight, div_weight,
                                         num_nodes)
 

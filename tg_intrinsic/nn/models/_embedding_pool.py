@@ -106,8 +106,10 @@ def can_fuse(x: Tensor, linear: torch.nn.Linear,
              norm: torch.nn.BatchNorm1d) -> bool:
     # a synchronised batch norm (not a BatchNorm1d) takes its statistics
     # over all processes, which the fused sweep cannot
+    # nor can it run in autocast's lower precision
     return (x.device.type == 'cpu' and x.dtype in (torch.float32,
                                                    torch.float64)
+            and not torch.is_autocast_enabled(x.device.type)
             and isinstance(norm, torch.nn.BatchNorm1d)
             and linear.bias is None and norm.affine
             and norm.track_running_stats and x.size(0) > 1)

@@ -1,4 +1,5 @@
-from typing import Dict, Iterable, Optional, Sequence, Tuple
+from typing import (Dict, Iterable, List, NamedTuple, Optional, Sequence,
+                    Tuple)
 
 import torch
 from torch import Tensor
@@ -6,6 +7,7 @@ from torch_geometric.data import Data
 
 from tg_intrinsic.geometry.checks import (check_channels, check_choice,
                                           check_positive_int)
+from tg_intrinsic.geometry.precision import complex_from, full_precision
 from tg_intrinsic.nn.harmonic_resnet_block import (COMPLEX_NORMS,
                                                    DEFAULT_COMPLEX_NORM,
                                                    harmonic_operators,
@@ -89,6 +91,47 @@ def pooling(data: Data, level: int) -> Tuple[Tensor, Tensor, int]:
     return data[f'cluster_{level}'], data[f'pool_transport_{level}'], size
 
 
+class Level(NamedTuple):
+    """What the layers of one level read: the harmonic operators by order
+    pair, the shape of every point, the point count, and (from level 1)
+    the pooling from the level above, ``cluster_l`` and
+    ``pool_transport_l``."""
+    operators: Dict
+    batch: Tensor
+    size: int
+    cluster: Optional[Tensor]
+    angle: Optional[Tensor]
+
+
+@torch.compiler.disable
+def prepare_levels(data: Data, x: Tensor, pairs: Sequence[Sequence[Tuple]],
+                   operators: Optional[List[Dict]] = None
+                   ) -> Tuple[List[Level], int]:
+    """Every level's :class:`Level` (``pairs[l]``: the order pairs of level
+    ``l``'s operators, or ``operators[l]`` built before) and the number of
+    shapes. Always eager: the data is validated and the operators built
+    here, once per forward, so that ``torch.compile`` traces only the
+    layers (one graph break)."""
+    if operators is not None and len(operators) != len(pairs):
+        raise ValueError(f"'operators' must hold one dict per level "
+                         f"({len(pairs)}), got {len(operators)}")
+    levels = []
+    shapes = 1
+    for level, level_pairs in enumerate(pairs):
+        if level == 0:
+            size, cluster, angle = x.size(0), None, None
+        else:
+            cluster, angle, size = pooling(data, level)
+        batch, shapes = level_batch(data, level, size, x)
+        if operators is None:
+            with full_precision(x.device.type):
+                ops = level_operators(data, level, size, level_pairs)
+        else:
+            ops = operators[level]
+        levels.append(Level(ops, batch, size, cluster, angle))
+    return levels, shapes
+
+
 def input_features(data: Data, in_channels: int) -> Tensor:
     """``data.x``, else ``data.pos``, checked against the model's width."""
     x = getattr(data, 'x', None)
@@ -101,7 +144,7 @@ def input_features(data: Data, in_channels: int) -> Tensor:
 
 def lift(x: Tensor) -> Tensor:
     """Real ``[N, C]`` features as the complex stream 0 ``[N, 1, C]``."""
-    return torch.complex(x, torch.zeros_like(x)).unsqueeze(1)
+    return complex_from(x).unsqueeze(1)
 
 
 def invariant(z: Tensor) -> Tensor:

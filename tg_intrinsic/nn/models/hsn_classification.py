@@ -9,8 +9,7 @@ from tg_intrinsic.nn.harmonic_conv import HarmonicConv
 from tg_intrinsic.nn.harmonic_resnet_block import (DEFAULT_COMPLEX_NORM,
                                                    HarmonicResNetBlock)
 from tg_intrinsic.nn.models._hsn_base import (HSNBase, input_features,
-                                              invariant, level_batch,
-                                              level_operators, lift, pooling)
+                                              invariant, lift, prepare_levels)
 from tg_intrinsic.pool import ParallelTransportPool
 
 
@@ -77,13 +76,12 @@ class HSNClassification(HSNBase):
     def forward(self, data: Data) -> Tensor:
         x = input_features(data, self.in_channels)
         o = self.max_order + 1
-        ops0 = level_operators(data, 0, x.size(0), [(1, o), (o, o)])
-        batch0, shapes = level_batch(data, 0, x.size(0), x)
-        z = self.block0(lift(F.relu(self.lin(x))), ops0, batch0, shapes)
-        cluster, angle, n1 = pooling(data, 1)
-        z = self.pool(z, cluster, angle, n1)
-        ops1 = level_operators(data, 1, n1, [(o, o)])
-        batch1, _ = level_batch(data, 1, n1, x)
-        z = self.block1(z, ops1, batch1, shapes)
-        z = self.conv(z, operator=ops1[(o, o)])
-        return global_mean_pool(invariant(z), batch1, shapes) + self.bias
+        (fine, coarse), shapes = prepare_levels(data, x, [[(1, o), (o, o)],
+                                                          [(o, o)]])
+        z = self.block0(lift(F.relu(self.lin(x))), fine.operators,
+                        fine.batch, shapes)
+        z = self.pool(z, coarse.cluster, coarse.angle, coarse.size)
+        z = self.block1(z, coarse.operators, coarse.batch, shapes)
+        z = self.conv(z, operator=coarse.operators[(o, o)])
+        return global_mean_pool(invariant(z), coarse.batch, shapes) \
+            + self.bias

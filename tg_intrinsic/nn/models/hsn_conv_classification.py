@@ -13,8 +13,7 @@ from tg_intrinsic.nn.harmonic_resnet_block import (COMPLEX_NORMS,
                                                    apply_complex_norm,
                                                    complex_norm)
 from tg_intrinsic.nn.models._hsn_base import (input_features, invariant,
-                                              level_batch, level_operators,
-                                              pooling)
+                                              prepare_levels)
 from tg_intrinsic.pool import ParallelTransportPool
 
 
@@ -118,16 +117,13 @@ class HSNConvClassification(torch.nn.Module):
         :meth:`forward` builds them; pass them to :meth:`forward` to reuse
         them for batches that share their meshes and precomputation (only
         ``x`` and ``y`` differ)."""
+        levels, _ = prepare_levels(data, data.pos, self._pairs())
+        return [level.operators for level in levels]
+
+    def _pairs(self) -> List[List[tuple]]:
         o = self.max_order + 1
-        out = []
-        for level in range(len(self.channels)):
-            size = data.level_size(level) if hasattr(data, 'level_size') \
-                else (data.num_nodes if level == 0
-                      else data[f'pos_{level}'].size(0))
-            first = 1 if level == 0 else o
-            out.append(level_operators(data, level, size,
-                                       [(first, o), (o, o)]))
-        return out
+        return [[(1 if level == 0 else o, o), (o, o)]
+                for level in range(len(self.channels))]
 
     def forward(self, data: Data,
                 operators: Optional[List[dict]] = None) -> Tensor:
@@ -135,28 +131,20 @@ class HSNConvClassification(torch.nn.Module):
         :meth:`operators` skips building them again."""
         z = input_features(data, self.in_channels)
         o = self.max_order + 1
-        size = z.size(0)
+        levels, shapes = prepare_levels(data, z, self._pairs(), operators)
         layer = 0
-        if operators is None:
-            operators = self.operators(data)
-        elif len(operators) != len(self.channels):
-            raise ValueError(f"'operators' must hold one dict per level "
-                             f"({len(self.channels)}), got {len(operators)}")
-        for level in range(len(self.channels)):
+        for level, here in enumerate(levels):
             if level > 0:
-                cluster, angle, size = pooling(data, level)
-                z = self.pool(z, cluster, angle, size)
-            batch, shapes = level_batch(data, level, size, z)
-            first = 1 if level == 0 else o
-            ops = operators[level]
+                z = self.pool(z, here.cluster, here.angle, here.size)
             for k in range(self.convs_per_level):
-                pair = (first, o) if k == 0 else (o, o)
-                z = self.convs[layer](z, operator=ops[pair])
+                pair = (1 if level == 0 else o, o) if k == 0 else (o, o)
+                z = self.convs[layer](z, operator=here.operators[pair])
                 z = self.acts[layer](apply_complex_norm(
-                    self.norms[layer], z, batch, shapes))
+                    self.norms[layer], z, here.batch, shapes))
                 layer += 1
-        z = self.out(z, operator=ops[(o, o)])
-        return global_mean_pool(invariant(z), batch, shapes) + self.bias
+        z = self.out(z, operator=levels[-1].operators[(o, o)])
+        return global_mean_pool(invariant(z), levels[-1].batch, shapes) \
+            + self.bias
 
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}({self.in_channels}, '

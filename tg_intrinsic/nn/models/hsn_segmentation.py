@@ -9,8 +9,7 @@ from tg_intrinsic.nn.harmonic_conv import HarmonicConv
 from tg_intrinsic.nn.harmonic_resnet_block import (DEFAULT_COMPLEX_NORM,
                                                    HarmonicResNetBlock)
 from tg_intrinsic.nn.models._hsn_base import (HSNBase, input_features,
-                                              invariant, level_batch,
-                                              level_operators, lift, pooling)
+                                              invariant, lift, prepare_levels)
 from tg_intrinsic.pool import ParallelTransportPool, ParallelTransportUnpool
 
 
@@ -79,19 +78,17 @@ class HSNSegmentation(HSNBase):
     def forward(self, data: Data) -> Tensor:
         x = input_features(data, self.in_channels)
         o = self.max_order + 1
-        ops0 = level_operators(data, 0, x.size(0), [(1, o), (o, o)])
-        batch0, shapes = level_batch(data, 0, x.size(0), x)
+        (fine, level1), shapes = prepare_levels(data, x, [[(1, o), (o, o)],
+                                                          [(o, o)]])
         z = lift(F.relu(self.lin(x)))
         for block in self.enc0:
-            z = block(z, ops0, batch0, shapes)
-        cluster, angle, n1 = pooling(data, 1)
-        ops1 = level_operators(data, 1, n1, [(o, o)])
-        batch1, _ = level_batch(data, 1, n1, x)
-        coarse = self.pool(z, cluster, angle, n1)
+            z = block(z, fine.operators, fine.batch, shapes)
+        coarse = self.pool(z, level1.cluster, level1.angle, level1.size)
         for block in self.enc1:
-            coarse = block(coarse, ops1, batch1, shapes)
-        z = torch.cat([z, self.unpool(coarse, cluster, angle)], dim=2)
+            coarse = block(coarse, level1.operators, level1.batch, shapes)
+        z = torch.cat([z, self.unpool(coarse, level1.cluster, level1.angle)],
+                      dim=2)
         for block in self.dec0:
-            z = block(z, ops0, batch0, shapes)
-        z = self.conv(z, operator=ops0[(o, o)])
+            z = block(z, fine.operators, fine.batch, shapes)
+        z = self.conv(z, operator=fine.operators[(o, o)])
         return invariant(z) + self.bias

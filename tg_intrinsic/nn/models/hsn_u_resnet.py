@@ -13,8 +13,7 @@ from tg_intrinsic.nn.harmonic_resnet_block import (COMPLEX_NORMS,
                                                    HarmonicResNetBlock,
                                                    norm_repr)
 from tg_intrinsic.nn.models._hsn_base import (input_features, invariant,
-                                              level_batch, level_operators,
-                                              lift, pooling)
+                                              lift, prepare_levels)
 from tg_intrinsic.pool import ParallelTransportPool, ParallelTransportUnpool
 
 
@@ -137,34 +136,28 @@ class HSNUResNet(torch.nn.Module):
     def forward(self, data: Data) -> Tensor:
         x = input_features(data, self.in_channels)
         o = self.max_order + 1
-        ops = [level_operators(data, 0, x.size(0), [(1, o), (o, o)])]
-        pools = [None]
-        batch, shapes = level_batch(data, 0, x.size(0), x)
-        batches = [batch]
-        for level in range(1, self.num_levels):
-            cluster, angle, size = pooling(data, level)
-            pools.append((cluster, angle, size))
-            ops.append(level_operators(data, level, size, [(o, o)]))
-            batches.append(level_batch(data, level, size, x)[0])
+        levels, shapes = prepare_levels(
+            data, x, [[(1, o), (o, o)]] + [[(o, o)]] * (self.num_levels - 1))
         z = lift(F.relu(self.lin(x)))
         skips = []
         for level, stack in enumerate(self.enc):
+            here = levels[level]
             if level > 0:
-                z = self.pool(z, *pools[level])
+                z = self.pool(z, here.cluster, here.angle, here.size)
             for block in stack:
-                z = block(z, ops[level], batches[level], shapes)
+                z = block(z, here.operators, here.batch, shapes)
             skips.append(z)
         for block in self.mid:
-            z = block(z, ops[-1], batches[-1], shapes)
+            z = block(z, levels[-1].operators, levels[-1].batch, shapes)
         for level in range(self.num_levels - 2, -1, -1):
-            cluster, angle, _ = pools[level + 1]
-            z = torch.cat([skips[level], self.unpool(z, cluster, angle)],
-                          dim=2)
+            below, here = levels[level + 1], levels[level]
+            z = torch.cat([skips[level],
+                           self.unpool(z, below.cluster, below.angle)], dim=2)
             for block in self.dec[level]:
-                z = block(z, ops[level], batches[level], shapes)
+                z = block(z, here.operators, here.batch, shapes)
         if self.conv is None:
             return invariant(z)
-        z = self.conv(z, operator=ops[0][(o, o)])
+        z = self.conv(z, operator=levels[0].operators[(o, o)])
         return invariant(z) + self.bias
 
     def __repr__(self) -> str:

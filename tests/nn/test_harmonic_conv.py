@@ -276,3 +276,39 @@ def test_operator_checks_the_per_edge_inputs_alike():
             continue
         with pytest.raises(ValueError, match=match):
             HarmonicOperator(*edit(edge_index, harmonic, transport), 60, 2, 2)
+
+
+def test_edge_masks_and_hooks_take_the_message_path():
+    # issue 39: the default sparse backend skipped propagate, so neither
+    # an edge mask nor a hook saw anything
+    from torch_geometric.explain.algorithm.utils import (clear_masks,
+                                                         set_masks)
+
+    from tests.nn.conftest import RINGS, two_level_data
+    data = two_level_data(0)
+    conv = HarmonicConv(3, 4, max_order=1, rings=RINGS,
+                        prev_order=0).double()
+    operator = HarmonicOperator(data.edge_index, data.harmonic,
+                                data.transport, 50, 1, 2)
+    plain = conv(data.x, operator=operator)
+    calls = []
+    handle = conv.register_propagate_forward_hook(
+        lambda module, inputs, out: calls.append(out.shape))
+    hooked = conv(data.x, operator=operator)
+    handle.remove()
+    assert len(calls) == 1
+    assert torch.allclose(hooked, plain, rtol=1e-10, atol=1e-12)
+    edges = data.edge_index.size(1)
+    set_masks(conv, torch.full((edges, ), -60.0, dtype=torch.float64),
+              data.edge_index)  # sigmoid(-60): every edge off
+    assert conv(data.x, operator=operator).abs().max() < 1e-20
+    keep = torch.rand(edges, dtype=torch.float64,
+                      generator=torch.Generator().manual_seed(0)) * 4 - 2
+    set_masks(conv, keep, data.edge_index)
+    masked = conv(data.x, operator=operator)
+    clear_masks(conv)
+    weight = keep.sigmoid()
+    by_hand = conv(data.x, data.edge_index, data.harmonic * weight[:, None,
+                                                                   None],
+                   data.transport)  # a mask scales each edge's term
+    assert torch.allclose(masked, by_hand, rtol=1e-10, atol=1e-12)

@@ -15,6 +15,7 @@ from tg_intrinsic.geometry.pointcloud.operators import (SurfaceOperators,
                                                         VectorCalculus,
                                                         interleaved, planar,
                                                         vector_norm)
+from tg_intrinsic.nn._machinery import sets_per_edge_machinery
 from tg_intrinsic.nn.sync_batch_norm import SyncBatchNorm
 from tg_intrinsic.nn.vector_linear import VectorLinear
 from tg_intrinsic.nn.vector_mlp import VectorMLP
@@ -171,16 +172,7 @@ class DeltaConv(MessagePassing):
 
     def _uses_messages(self, backend: Optional[str]) -> bool:
         if backend is None:
-            # PyG's explainers set an edge mask (explain=True); hooks see
-            # only what runs through propagate.
-            return bool(self.explain) or any(
-                len(hooks) > 0 for hooks in (
-                    self._propagate_forward_pre_hooks,
-                    self._propagate_forward_hooks,
-                    self._message_forward_pre_hooks,
-                    self._message_forward_hooks,
-                    self._aggregate_forward_pre_hooks,
-                    self._aggregate_forward_hooks))
+            return sets_per_edge_machinery(self)
         if backend not in ('sparse', 'message'):
             raise ValueError(f"backend must be 'sparse', 'message' or None, "
                              f"got {backend!r}")

@@ -9,10 +9,11 @@ from torch_geometric.nn import MessagePassing
 from tg_intrinsic.geometry.checks import (check_edge_index,
                                           check_positive_int, check_rows,
                                           check_tensor)
-from tg_intrinsic.geometry.precision import (complex_from,
-                                             refuse_low_precision)
 from tg_intrinsic.geometry.geodesics.harmonic import (HarmonicOperator,
                                                       check_harmonic_graph)
+from tg_intrinsic.geometry.precision import (at_least_float32, complex_from,
+                                             refuse_low_precision)
+from tg_intrinsic.nn._machinery import sets_per_edge_machinery
 
 
 class HarmonicConv(MessagePassing):
@@ -124,15 +125,21 @@ class HarmonicConv(MessagePassing):
                 harmonic: Optional[Tensor] = None,
                 transport: Optional[Tensor] = None,
                 operator: Optional[HarmonicOperator] = None,
-                backend: str = 'sparse') -> Tensor:
+                backend: Optional[str] = None) -> Tensor:
         """Pass either the disc graph with its precomputed ``harmonic`` and
         ``transport``, or an ``operator`` built once on them and shared by
-        several layers."""
+        several layers. ``backend``: ``'sparse'``, ``'message'`` (per-edge
+        messages through :meth:`propagate`), or :obj:`None`: messages while
+        an edge mask (PyG's explainers) or a propagate hook is set, sparse
+        otherwise; both compute the same values."""
+        if backend is None:
+            backend = 'message' if sets_per_edge_machinery(self) \
+                else 'sparse'
+        if backend == 'message' and operator is not None \
+                and edge_index is None:
+            edge_index, harmonic, transport = operator.graph
+            operator = None
         refuse_low_precision(self.radial, 'weights', 'HarmonicConv')
-        for name, value in (('harmonic', harmonic),
-                            ('transport', transport)):
-            if value is not None and not value.is_complex():
-                refuse_low_precision(value, f"'{name}'", 'HarmonicConv')
         x = self._complex_input(x)
         if backend == 'sparse' and operator is not None:
             if not isinstance(operator, HarmonicOperator):
@@ -180,6 +187,7 @@ class HarmonicConv(MessagePassing):
         p = self.prev_order + 1
         x_j = x_j.view(-1, p, self.in_channels)
         order = torch.arange(p, device=x_j.device)
+        transport = at_least_float32(transport)  # complex maths in float32
         spin = torch.polar(torch.ones_like(transport).unsqueeze(1),
                            transport.unsqueeze(1) * order)
         x_j = x_j * spin.unsqueeze(2)  # transported, [E, P+1, C]

@@ -209,6 +209,9 @@ class HarmonicOperator:
         check_harmonic_graph(edge_index, harmonic, transport,
                              max(in_orders, out_orders))
         q_count = harmonic.size(1)
+        # the graph it was built on, for layers that must send per-edge
+        # messages instead (edge masks, explainers, propagate hooks)
+        self.graph = (edge_index, harmonic, transport)
         self.num_nodes = n = num_nodes
         self.rings, self.in_orders, self.out_orders = q_count, in_orders, \
             out_orders

@@ -17,6 +17,9 @@ from tests.cli import assert_user_error, run_cli
      ['no/such/folder', 'existing folder']),
     (['train', 'resnet'], ["invalid choice: 'resnet'"]),
     (['train', 'deltanet', '--epochs', 'many'], ['--epochs', 'many']),
+    (['train', 'deltanet', '--device', 'cpu', '--precision', '16-mixed'],
+     ['16-mixed needs a CUDA device', 'use bf16-mixed']),
+    (['train', 'deltanet', '--precision', 'half'], ['half', 'bf16-mixed']),
 ])
 def test_train_user_mistakes_end_in_one_line(capsys, argv, needles):
     code, _, err = run_cli(capsys, *argv)

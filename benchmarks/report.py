@@ -769,6 +769,34 @@ def gravo_scale(d, _):
              'memory', 'gravo_scale.py', result)]
 
 
+@rows_for('gravo_diffusion')
+def gravo_diffusion(d, _):
+    runs = {r['solver']: r for r in d['runs']}
+    gravo, direct = runs['gravo'], runs['direct']
+    ratio = d['step_ratio']
+    speed = (f"**Gravo MG {times(ratio)} faster per step**" if ratio >= 1
+             else f"**Gravo MG {times(1 / ratio)} slower per step**")
+    quick = ' (quick smoke run)' if d.get('quick') else ''
+    apart = sci(d['learned_time_difference']) \
+        if d['learned_time_difference'] else '0'
+    result = (f"{d['protocol']}{quick}: {speed} "
+              f"({1e3 * gravo['step_s']:.0f} vs "
+              f"{1e3 * direct['step_s']:.0f} ms: forward, adjoint "
+              f"backward and the update; Gravo levels "
+              f"{', '.join(str(n) for n in gravo['levels'])}, built once "
+              f"in {seconds(gravo['setup_s'])} s, tolerance "
+              f"{d['tol']:g}); learned times within "
+              f"{pct(gravo['max_time_error'], 2)} (Gravo MG) and "
+              f"{pct(direct['max_time_error'], 2)} (LU) of the true "
+              f"ones, final loss {sci(gravo['final_relative_loss'])} vs "
+              f"{sci(direct['final_relative_loss'])} of the input's, the "
+              f"arms' times apart by {apart} of the largest; "
+              f"{d['machine']['cpu_count']} CPU cores")
+    return [('GravoDiffusion: learning per-channel diffusion times '
+             '(DiffusionNet\'s layer, implicit) by adjoint solves, Gravo '
+             'MG vs the sparse LU', 'gravo_diffusion.py', result)]
+
+
 @rows_for('hsn_accuracy')
 def hsn_accuracy(d, _):
     parts = []

@@ -348,3 +348,22 @@ def test_the_svbrdf_rows_report_the_default_pipeline(copies):
                if "the command's default (full-integral" in line][0]
     assert 'tables over roughness' in mitsuba and 'goal: at most a third' \
         in mitsuba
+
+
+def test_the_gravo_diffusion_row_follows_its_numbers(copies):
+    results, _ = copies
+    before = report.build_table(str(results))
+
+    def slower_gravo(data):
+        gravo, direct = data['runs']
+        assert (gravo['solver'], direct['solver']) == ('gravo', 'direct')
+        data['step_ratio'] = 0.5
+        gravo['max_time_error'] = 0.0321
+
+    edit(results / 'gravo_diffusion.json', slower_gravo)
+    after = report.build_table(str(results))
+    changed = [line for line in after.split('\n')
+               if line not in before.split('\n')]
+    assert len(changed) == 1
+    assert '**Gravo MG 2.0x slower per step**' in changed[0]
+    assert 'learned times within 3.21% (Gravo MG)' in changed[0]

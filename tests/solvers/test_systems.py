@@ -13,7 +13,8 @@ from torch_geometric.data import Data
 
 from tg_intrinsic.geometry import lumped_mass
 from tg_intrinsic.solvers import (ConvergenceWarning, GravoMG, conformal_flow,
-                                  poisson, smooth, stiffness_and_mass)
+                                  diffuse, poisson, smooth,
+                                  stiffness_and_mass)
 
 from tests.conftest import icosphere
 
@@ -313,3 +314,191 @@ def test_a_point_cloud_too_small_for_the_robust_laplacian():
         stiffness_and_mass(data)
     data.pos = torch.randn(31, 3, dtype=torch.float64)
     assert stiffness_and_mass(data)[0].shape == (31, 31)
+
+
+# ---------------------------------------------------------------- gradients
+# The gradchecks solve to tol=1e-12: the solver's error (tol times the
+# condition number, relative) must stay well below gradcheck's finite-
+# difference error (eps=1e-6, atol=1e-5, rtol=1e-3). On a 42-vertex
+# icosphere with one coarse level of 4 points, so the cycles, not a direct
+# solve, are differentiated.
+GRADCHECK_TOL = 1e-12
+
+
+def tiny_data(channels=2):
+    pos, face = icosphere(1)
+    g = torch.Generator().manual_seed(2)
+    data = Data(pos=pos, face=face,
+                x=torch.randn(pos.size(0), channels, generator=g,
+                              dtype=torch.float64))
+    return data, GravoMG.from_mesh(pos, face, lower_bound=4)
+
+
+def test_gradients_match_dense_solves():
+    # before the adjoint solves the results had no gradient at all
+    data = small_data(channels=3)
+    S, m = stiffness_and_mass(data)
+    S_dense = S.toarray()
+    solver = GravoMG.from_mesh(data.pos, data.face, lower_bound=20)
+    weights = torch.randn(data.x.shape, dtype=torch.float64,
+                          generator=torch.Generator().manual_seed(3))
+    for problem, weight, matrix in (
+            (smooth, 1e-2, np.diag(m) + 1e-2 * S_dense),
+            (poisson, 1.0, S_dense + np.diag(m))):
+        y = data.x.clone().requires_grad_()
+        out = problem(data, weight, y=y, solver=solver, tol=1e-10)
+        assert solver.info.direct is None  # cycles, not an LU
+        assert out.requires_grad
+        # with or without grad: the same numbers
+        assert torch.equal(out.detach(), problem(data, weight, y=data.x,
+                                                 solver=solver, tol=1e-10))
+        (out * weights).sum().backward()
+        # x = A^-1 M y, so dL/dy = M A^-T w
+        exact = m[:, None] * np.linalg.solve(matrix.T, weights.numpy())
+        assert np.abs(y.grad.numpy() - exact).max() < \
+            1e-8 * np.abs(exact).max()
+    # dL/dalpha = -lambda^T S x with lambda = A^-T w
+    alpha = torch.tensor(1e-2, dtype=torch.float64, requires_grad=True)
+    out = smooth(data, alpha, solver=solver, tol=1e-10)
+    (out * weights).sum().backward()
+    A = np.diag(m) + 1e-2 * S_dense
+    x = np.linalg.solve(A, m[:, None] * data.x.numpy())
+    multiplier = np.linalg.solve(A.T, weights.numpy())
+    exact = -(multiplier * (S_dense @ x)).sum()
+    assert abs(float(alpha.grad) - exact) < 1e-8 * abs(exact)
+    assert torch.equal(out.detach(), smooth(data, 1e-2, solver=solver,
+                                            tol=1e-10))
+
+
+def test_gradcheck_smooth_and_poisson_in_y():
+    # one channel: every input and output costs a solve (several channels
+    # are checked in test_gradients_match_dense_solves)
+    data, solver = tiny_data(channels=1)
+    y = data.x.clone().requires_grad_()
+    for problem, weight in ((smooth, 1e-1), (poisson, 3.0)):
+        problem(data, weight, solver=solver, tol=GRADCHECK_TOL)
+        assert solver.info.direct is None and solver.info.iterations > 1
+        assert torch.autograd.gradcheck(
+            lambda y: problem(data, weight, y=y, solver=solver,
+                              tol=GRADCHECK_TOL), (y, ))
+
+
+@pytest.mark.parametrize('beta, split', [(0.0, None), (1e-4, None),
+                                         (1e-4, False)])
+def test_gradcheck_smooth_in_alpha(beta, split):
+    # beta > 0: through both factors of the split solve, or the full
+    # bi-Laplacian system (with PCG)
+    data, solver = tiny_data(channels=1)
+    alpha = torch.tensor(0.05, dtype=torch.float64, requires_grad=True)
+    method = 'pcg' if split is False else 'cycles'
+    assert torch.autograd.gradcheck(
+        lambda a: smooth(data, a, beta=beta, split=split, solver=solver,
+                         tol=GRADCHECK_TOL, method=method), (alpha, ))
+
+
+def test_learned_alpha_on_float32_and_the_double_root():
+    data, solver = tiny_data()
+    y = data.x.float().requires_grad_()
+    alpha = torch.tensor([0.05], requires_grad=True)
+    out = smooth(data, alpha, y=y, solver=solver)
+    assert out.dtype == torch.float32 and out.requires_grad
+    out.square().sum().backward()
+    # smoothing more shrinks the signal: the loss falls with alpha
+    assert alpha.grad.dtype == torch.float32 and alpha.grad.shape == (1, )
+    assert float(alpha.grad) < 0 and y.grad.dtype == torch.float32
+    # at alpha^2 = 4 beta the factors' derivative is infinite: the full
+    # system gives the finite gradient, equal to the one just beside it
+    grads = []
+    for a in (0.02, 0.02 * (1 + 1e-7)):
+        alpha = torch.tensor(a, dtype=torch.float64, requires_grad=True)
+        smooth(data, alpha, beta=1e-4, solver=solver,
+               tol=GRADCHECK_TOL).square().sum().backward()
+        grads.append(float(alpha.grad))
+    assert np.isfinite(grads).all()
+    assert abs(grads[0] - grads[1]) < 1e-5 * abs(grads[0])
+    with pytest.raises(ValueError, match='differentiable alpha'):
+        smooth(data, torch.tensor(0.02, dtype=torch.float64,
+                                  requires_grad=True), beta=1e-4,
+               solver=solver, split=True)
+    with pytest.raises(ValueError, match='one floating-point value'):
+        smooth(data, torch.tensor([0.1, 0.2]), solver=solver)
+
+
+def dense_diffusion(S, m, y, times):
+    return np.stack([np.linalg.solve(np.diag(m) + t * S.toarray(), m * c)
+                     for c, t in zip(y.T, times)], 1)
+
+
+def test_diffuse_matches_dense_solves_per_channel():
+    data = small_data(channels=4)
+    S, m = stiffness_and_mass(data)
+    times = [1e-2, 0.0, 1e-3, 1e-2]
+    exact = dense_diffusion(S, m, data.x.numpy(), times)
+    solver = GravoMG.from_mesh(data.pos, data.face, lower_bound=20)
+    solver.cache_size = 3
+    for which in ('direct', solver):
+        out = diffuse(S, m, data.x, torch.tensor(times, dtype=torch.float64),
+                      which, tol=1e-10)
+        assert out.shape == data.x.shape and out.dtype == data.x.dtype
+        assert np.abs(out.numpy() - exact).max() < 1e-8 * np.abs(
+            exact).max()
+    assert solver.info.converged and solver.info.direct is None
+    # the two equal times share a block solve: three matrices, all three
+    # still set up in a cache of three
+    for t in set(times):
+        solver.setup((sp.diags(m) + t * S).tocsr())
+        assert solver.info.cached
+    # one number: every channel with it, as smooth does
+    out = diffuse(S, m, data.x, 1e-2, 'direct')
+    assert torch.allclose(out, smooth(data, 1e-2, tol=1e-12), rtol=0,
+                          atol=1e-9)
+    # (N) signals and float32
+    out = diffuse(S, m, data.x[:, 0].float(), 1e-2, 'direct')
+    assert out.shape == (m.size, ) and out.dtype == torch.float32
+
+
+@pytest.mark.parametrize('which', ['direct', 'gravo'])
+def test_gradcheck_diffuse_in_y_and_times(which):
+    data, solver = tiny_data(channels=3)
+    S, m = stiffness_and_mass(data)
+    solver = solver if which == 'gravo' else 'direct'
+    y = data.x.clone().requires_grad_()
+    times = torch.tensor([0.1, 0.03, 0.1], dtype=torch.float64,
+                         requires_grad=True)
+    assert torch.autograd.gradcheck(
+        lambda y, t: diffuse(S, m, y, t, solver, tol=GRADCHECK_TOL),
+        (y, times))
+    # one time shared by all channels collects their gradients
+    shared = torch.tensor(0.1, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(
+        lambda t: diffuse(S, m, data.x, t, solver, tol=GRADCHECK_TOL),
+        (shared, ))
+
+
+def test_diffuse_bad_input():
+    data, solver = tiny_data()
+    S, m = stiffness_and_mass(data)
+    y = data.x
+    with pytest.raises(ValueError, match="'time' must be finite and >= 0"):
+        diffuse(S, m, y, torch.tensor([0.1, float('nan')]), solver)
+    with pytest.raises(ValueError, match="'time' must be finite and >= 0"):
+        diffuse(S, m, y, torch.tensor([0.1, -0.1]), solver)
+    with pytest.raises(ValueError, match=r'value per channel \(2\)'):
+        diffuse(S, m, y, torch.ones(3), solver)
+    with pytest.raises(ValueError, match="'time' must be a finite number"):
+        diffuse(S, m, y, -1.0, solver)
+    with pytest.raises(ValueError, match=r"'y' must be a float tensor of "
+                       r"shape \(42\)"):
+        diffuse(S, m, y[:10], 0.1, solver)
+    with pytest.raises(ValueError, match='NaN'):
+        diffuse(S, m, torch.full_like(y, float('nan')), 0.1, solver)
+    with pytest.raises(ValueError, match="'mass' must hold one finite "
+                       "positive value"):
+        diffuse(S, -m, y, 0.1, solver)
+    with pytest.raises(ValueError, match="'stiffness' must be a square "
+                       "scipy sparse matrix"):
+        diffuse(S.toarray(), m, y, 0.1, solver)
+    with pytest.raises(ValueError, match="'solver' must be one of"):
+        diffuse(S, m, y, 0.1, 'gravo')
+    with pytest.raises(ValueError, match="'solver' must be a GravoMG"):
+        diffuse(S, m, y, 0.1, None)

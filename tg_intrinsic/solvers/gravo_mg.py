@@ -15,6 +15,7 @@ from tg_intrinsic.geometry.checks import (check_choice, check_edge_index,
                                           check_positive_float,
                                           check_positive_int)
 from tg_intrinsic.geometry.multigrid.gravo import gravo_hierarchy
+from tg_intrinsic.solvers._adjoint import linear_solve
 from tg_intrinsic.solvers._kernels import (check_matrix, fingerprint,
                                            galerkin, matvec)
 from tg_intrinsic.solvers._torch_levels import TorchLevels
@@ -318,7 +319,30 @@ class GravoMG:
         :attr:`info` holds a :class:`SolveInfo`. A solve that stops at
         :obj:`max_iter` cycles above :obj:`tol` returns its last iterate,
         sets ``info.reason`` and warns (:class:`ConvergenceWarning`), or
-        raises a :class:`RuntimeError` with :obj:`strict=True`."""
+        raises a :class:`RuntimeError` with :obj:`strict=True`.
+
+        A torch :obj:`b` that requires grad gives an :math:`x` that is
+        differentiable with respect to :obj:`b` (not :obj:`A`, a scipy
+        matrix, nor :obj:`x0`): the backward pass solves the adjoint
+        system :math:`A^\top \lambda = \partial L / \partial x`, which
+        is this system again, since :meth:`setup` accepts only a symmetric
+        :math:`A`, with the same backend, device and options (:obj:`tol`,
+        :obj:`cycle`, ...) on the same cached levels (set up again only if
+        :obj:`cache_size` other matrices were solved in between), and
+        returns
+        :math:`\partial L / \partial b = \lambda`. The gradient is as
+        accurate as the solve: to the relative residual :obj:`tol`.
+        :attr:`info` then describes the adjoint solve."""
+        if isinstance(b, torch.Tensor) and b.requires_grad and \
+                torch.is_grad_enabled():
+            options = dict(tol=tol, max_iter=max_iter, criterion=criterion,
+                           mass=mass, pre=pre, post=post, cycle=cycle,
+                           strict=strict, method=method)
+            if isinstance(x0, torch.Tensor):
+                x0 = x0.detach()
+            return linear_solve(
+                b, lambda rhs: self.solve(A, rhs, x0=x0, **options),
+                lambda grad: self.solve(A, grad, **options))
         check_choice(cycle, 'cycle', CYCLES)
         check_choice(criterion, 'criterion', CRITERIA)
         check_choice(method, 'method', METHODS)

@@ -1,22 +1,28 @@
 r"""Laplace-type systems on the surface of a :class:`~torch_geometric.data.
 Data` and their solution with :class:`GravoMG`: stiffness and mass
 matrices, smoothing :math:`(M + \alpha S + \beta S M^{-1} S) x = M y` and
-the screened Poisson problem :math:`(S + \eta M) x = M y`, and the
-conformalized mean curvature flow, whose matrix changes every step."""
+the screened Poisson problem :math:`(S + \eta M) x = M y`, the heat step
+with a time per channel :math:`(M + t_c S) u_c = M y_c`, and the
+conformalized mean curvature flow, whose matrix changes every step. The
+first three are differentiable (adjoint solves on the same hierarchy)."""
 import math
 import numbers
 import warnings
-from typing import Optional, Tuple
+from functools import partial
+from typing import Optional, Tuple, Union
 
 import numpy as np
 import scipy.sparse as sp
 import torch
+from scipy.sparse.linalg import splu
 from torch import Tensor
 from torch_geometric.data import Data
 
 from tg_intrinsic.geometry import cotan_laplacian, lumped_mass, to_scipy
-from tg_intrinsic.geometry.checks import check_points, check_positive_int
+from tg_intrinsic.geometry.checks import (check_choice, check_points,
+                                          check_positive_int, check_tensor)
 from tg_intrinsic.geometry.mesh import edge_face_counts
+from tg_intrinsic.solvers._adjoint import linear_solve
 from tg_intrinsic.solvers.gravo_mg import GravoMG, SolveInfo
 from tg_intrinsic.surface_attributes import surface_graph
 
@@ -77,28 +83,46 @@ def _default_solver(data, ratio: float, lower_bound: int) -> GravoMG:
                                lower_bound=lower_bound)
 
 
+def _product(matrix: sp.spmatrix):
+    """X -> matrix @ X for float64 tensors (the product runs on the CPU,
+    the result comes back to X's device)."""
+    def apply(X: Tensor) -> Tensor:
+        return torch.from_numpy(matrix @ X.cpu().numpy()).to(X.device)
+    return apply
+
+
 def _solve(data, matrix, mass, y, solver, tol, ratio, lower_bound, cycle,
-           max_iter, method):
+           max_iter, method, weight=None, direction=None):
+    """Solves ``matrix x = M y`` on the CPU, differentiable with respect
+    to ``y`` and ``weight`` (``matrix = A_0 + weight * D``, ``direction``
+    the product with D) when they require grad."""
     y = data.x if y is None else y
     if y is None:
         raise ValueError("nothing to solve for: pass y or set data.x")
-    values = y.detach().double().cpu().numpy()
-    if values.ndim not in (1, 2) or values.shape[0] != mass.size:
-        raise ValueError(f"'y' has shape {tuple(values.shape)} (rows: "
-                         f"{values.shape[0] if values.ndim else 0}) but the "
+    y = check_tensor(y, 'y')
+    if y.dim() not in (1, 2) or y.size(0) != mass.size:
+        raise ValueError(f"'y' has shape {tuple(y.shape)} (rows: "
+                         f"{y.size(0) if y.dim() else 0}) but the "
                          f"surface has {mass.size} points; give (N) or "
                          f"(N, C) with one row per point")
-    if not np.isfinite(values).all():
+    if not bool(torch.isfinite(y).all()):
         raise ValueError("'y' holds NaN or infinite values")
     if solver is None:
         solver = _default_solver(data, ratio, lower_bound)
-    # All channels at once: one block solve, so solver.info describes it.
-    # Not converging warns there (ConvergenceWarning).
-    rhs = mass[:, None] * values.reshape(mass.size, -1)
-    out = solver.solve(matrix, rhs, tol=tol, cycle=cycle, max_iter=max_iter,
-                       method=method)
-    return torch.from_numpy(out.reshape(values.shape)).to(y.dtype).to(
-        y.device)
+    load = torch.from_numpy(mass).to(y.device)[:, None] * \
+        y.double().reshape(mass.size, -1)
+
+    def solve(rhs: Tensor) -> Tensor:
+        # All channels at once: one block solve, so solver.info describes
+        # it. Not converging warns there (ConvergenceWarning).
+        out = solver.solve(matrix, rhs.cpu().numpy(), tol=tol, cycle=cycle,
+                           max_iter=max_iter, method=method)
+        return torch.from_numpy(out).to(rhs.device)
+
+    # Every matrix here is symmetric (GravoMG.setup refuses any other), so
+    # the adjoint solve is the same solve.
+    out = linear_solve(load, solve, weight=weight, direction=direction)
+    return out.reshape(y.shape).to(y.dtype)
 
 
 # Neighbours of every point in the robust Laplacian of a point cloud (the
@@ -148,14 +172,23 @@ def _check_scale(S: sp.csr_matrix, m: np.ndarray, parameter: str,
 
 
 def _check_weight(value, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or \
-            not math.isfinite(value) or value < 0:
+    """A finite number >= 0 (a Python number, or a one-element
+    floating-point tensor), as a float."""
+    number = value
+    if isinstance(value, Tensor):
+        if value.numel() != 1 or not value.is_floating_point():
+            raise ValueError(f"'{name}' given as a tensor must hold one "
+                             f"floating-point value, got {value.dtype} of "
+                             f"shape {list(value.shape)}")
+        number = float(value.detach())
+    if isinstance(number, bool) or not isinstance(number, numbers.Real) or \
+            not math.isfinite(number) or number < 0:
         raise ValueError(f"'{name}' must be a finite number >= 0, got "
                          f"{value!r}")
-    return float(value)
+    return float(number)
 
 
-def smooth(data, alpha: float, y: Optional[Tensor] = None,
+def smooth(data, alpha: Union[float, Tensor], y: Optional[Tensor] = None,
            solver: Optional[GravoMG] = None, tol: float = 1e-8,
            robust: Optional[bool] = None, beta: float = 0.0,
            ratio: float = 8.0, lower_bound: int = 1000, cycle: str = 'V',
@@ -191,12 +224,33 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
     whose :attr:`~GravoMG.info` then describes the whole solve. A solve
     that does not reach :obj:`tol` warns (:class:`ConvergenceWarning`).
 
+    Differentiable with respect to :math:`y` when it requires grad, and
+    with respect to :math:`\alpha` when it is given as a tensor that
+    requires grad (a learned diffusion time, as in DiffusionNet): for
+    :math:`A x = M y` the backward pass solves the adjoint system with the
+    same solver and hierarchy (every matrix here is symmetric, so
+    :math:`A^\top = A`),
+
+    .. math::
+        \lambda = A^{-\top} \frac{\partial L}{\partial x}, \qquad
+        \frac{\partial L}{\partial y} = M \lambda, \qquad
+        \frac{\partial L}{\partial \alpha} = -\lambda^\top S x,
+
+    (through both factors when split). The gradients are as accurate as
+    the solves: to the relative residual :obj:`tol` (take e.g.
+    :obj:`1e-12` for a finite-difference check). The solves run on the
+    CPU in float64; a :math:`y` on another device is moved there and the
+    result and its gradients come back to its device. After a backward
+    pass :attr:`~GravoMG.info` describes the last adjoint solve.
+
     Args:
         data (Data): ``pos`` :math:`(N, 3)`, ``face`` :math:`(3, F)` for a
             mesh (else a point cloud), optionally ``x`` and a hierarchy.
-        alpha (float): Laplacian weight :math:`\alpha \geq 0` (time step,
-            in units of area: scale it with the surface).
+        alpha (float or Tensor): Laplacian weight :math:`\alpha \geq 0`
+            (time step, in units of area: scale it with the surface); a
+            one-element tensor that requires grad makes it learnable.
         y (Tensor, optional): The signal; default ``data.x``.
+            Differentiable.
         solver (GravoMG, optional): A solver on the points of ``data``.
         tol (float, optional): Relative residual to reach in every
             channel. (default: :obj:`1e-8`)
@@ -227,6 +281,7 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
         - **input:** ``y`` :math:`(N)` or :math:`(N, C)`
         - **output:** :math:`x` of the shape, dtype and device of ``y``
     """
+    time = alpha if isinstance(alpha, Tensor) else None
     alpha, beta = _check_weight(alpha, 'alpha'), _check_weight(beta, 'beta')
     if alpha == 0 and beta == 0:
         raise ValueError("'alpha' must be positive (or zero with a positive "
@@ -238,23 +293,38 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
                          f"degenerate triangles")
     if alpha > 0:
         _check_scale(S, m, 'alpha', alpha, on_mass=False)
-    can_split = beta > 0 and alpha * alpha >= 4 * beta
+    # dA / dalpha = S for the full system and for each factor, whose
+    # weights a, b follow alpha through the square root; at the double
+    # root alpha^2 = 4 beta that root's derivative is infinite (the
+    # product's is not), so a differentiable alpha takes the full system.
+    learned = time is not None and time.requires_grad and \
+        torch.is_grad_enabled()
+    double_root = alpha * alpha == 4 * beta
+    can_split = beta > 0 and alpha * alpha >= 4 * beta and \
+        not (learned and double_root)
     if split and not can_split:
         raise ValueError(f"split=True needs alpha^2 >= 4 beta (and beta > "
-                         f"0) for real factors; got alpha={alpha:g}, "
+                         f"0) for real factors, and alpha^2 > 4 beta for a "
+                         f"differentiable alpha; got alpha={alpha:g}, "
                          f"beta={beta:g}: leave split unset")
+    weight = None if time is None else time.reshape(()).double()
     if can_split and split is not False:
         root = math.sqrt(alpha * alpha - 4 * beta)
         factors = ((alpha + root) / 2, (alpha - root) / 2)
+        weights = (None, None)
+        if weight is not None:
+            root_weight = torch.sqrt(weight * weight - 4 * beta)
+            weights = ((weight + root_weight) / 2,
+                       (weight - root_weight) / 2)
         if solver is None:
             solver = _default_solver(data, ratio, lower_bound)
         infos = []
-        for weight in factors:
+        for factor, factor_weight in zip(factors, weights):
             # The second solve's load M z is the first's mass-weighted
             # solution; both matrices are Laplace-type.
-            y = _solve(data, (sp.diags(m) + weight * S).tocsr(), m, y,
+            y = _solve(data, (sp.diags(m) + factor * S).tocsr(), m, y,
                        solver, tol, ratio, lower_bound, cycle, max_iter,
-                       method)
+                       method, factor_weight, _product(S))
             infos.append(solver.info)
         solver.info = combined_info(infos)
         return y
@@ -263,7 +333,7 @@ def smooth(data, alpha: float, y: Optional[Tensor] = None,
         A = A + beta * (S @ sp.diags(1.0 / m) @ S)
         A = 0.5 * (A + A.T)  # exactly symmetric despite rounding
     return _solve(data, A.tocsr(), m, y, solver, tol, ratio, lower_bound,
-                  cycle, max_iter, method)
+                  cycle, max_iter, method, weight, _product(S))
 
 
 def combined_info(infos) -> SolveInfo:
@@ -298,12 +368,19 @@ def poisson(data, eta: float, y: Optional[Tensor] = None,
     one block as in :func:`smooth`, whose arguments :obj:`solver`,
     :obj:`tol`, :obj:`robust`, :obj:`ratio`, :obj:`lower_bound`,
     :obj:`cycle`, :obj:`max_iter` and :obj:`method` mean the same here.
+    Differentiable with respect to :math:`y` when it requires grad, by the
+    adjoint solve on the same solver and hierarchy (the matrix is
+    symmetric), :math:`\partial L / \partial y = M (S + \eta M)^{-1}
+    \partial L / \partial x`, as accurate as :obj:`tol`; the solves run
+    on the CPU and the result and gradient come back to the device of
+    :math:`y`.
 
     Args:
         data (Data): As in :func:`smooth`.
         eta (float): Screening weight :math:`\eta > 0`, in units of
             1 / area (scale it with the surface).
         y (Tensor, optional): The right-hand side; default ``data.x``.
+            Differentiable.
 
     Shapes:
         - **input:** ``y`` :math:`(N)` or :math:`(N, C)`
@@ -318,6 +395,156 @@ def poisson(data, eta: float, y: Optional[Tensor] = None,
         _check_scale(S, m, 'eta', eta, on_mass=True)
     return _solve(data, (S + eta * sp.diags(m)).tocsr(), m, y, solver, tol,
                   ratio, lower_bound, cycle, max_iter, method)
+
+
+def _as_times(time, channels: int):
+    """``time`` (a number, or a tensor of one value or one per channel)
+    as float64 values per channel, and the tensor they follow (None for
+    a number)."""
+    if isinstance(time, Tensor):
+        if not time.is_floating_point() or time.dim() > 1 or \
+                time.numel() not in (1, channels):
+            raise ValueError(f"'time' must be one number or one floating-"
+                             f"point value per channel ({channels}), got "
+                             f"{time.dtype} of shape {list(time.shape)}")
+        values = time.detach().double().cpu().reshape(-1).expand(channels)
+        weight = time.reshape(-1).double().expand(channels)
+    else:
+        values = torch.full((channels, ), _check_weight(time, 'time'),
+                            dtype=torch.float64)
+        weight = None
+    if not bool(torch.isfinite(values).all()) or bool((values < 0).any()):
+        raise ValueError(f"'time' must be finite and >= 0 in every channel, "
+                         f"got {values.tolist()}; a learned time that went "
+                         f"NaN needs a smaller learning rate")
+    return values, weight
+
+
+def diffuse(stiffness: sp.spmatrix, mass, y: Tensor, time,
+            solver: Union[GravoMG, str], tol: float = 1e-8,
+            cycle: str = 'V', max_iter: int = 100,
+            method: str = 'cycles') -> Tensor:
+    r"""One implicit step of the heat flow for every channel of
+    :math:`y`, each with its own time :math:`t_c \geq 0`:
+
+    .. math::
+        (M + t_c S)\, u_c = M y_c,
+
+    with a stiffness matrix :math:`S` and lumped masses :math:`M` (e.g.
+    :func:`stiffness_and_mass`), solved by :obj:`solver`: a
+    :class:`GravoMG` on the same points, or ``'direct'`` for scipy's
+    sparse LU (:func:`~scipy.sparse.linalg.splu`). Channels with equal
+    times share one block solve (one matrix set-up); other channels get a
+    matrix each, so a :class:`GravoMG` with a :obj:`cache_size` of at
+    least the number of distinct times keeps them all for the backward
+    pass.
+
+    Differentiable with respect to :math:`y` and, when :obj:`time` is a
+    tensor that requires grad, :math:`t`: with
+    :math:`\lambda_c = (M + t_c S)^{-\top} \partial L / \partial u_c`,
+    solved with the same hierarchy (or LU factors) as the forward solve,
+
+    .. math::
+        \frac{\partial L}{\partial y_c} = M \lambda_c, \qquad
+        \frac{\partial L}{\partial t_c} = -\lambda_c^\top S u_c .
+
+    The matrices are symmetric (Gravo MG checks), so the adjoint is the
+    same solve; the LU's is its transposed solve. The gradients are as
+    accurate as the solves, to the relative residual :obj:`tol` with
+    Gravo MG (to rounding with the LU). The solves run on the CPU in
+    float64; :math:`y` and :obj:`time` on another device are moved there,
+    and the result and gradients come back to their devices.
+
+    Args:
+        stiffness (scipy.sparse matrix): :math:`S`, :math:`(N, N)`,
+            symmetric positive semi-definite.
+        mass (numpy.ndarray or Tensor): The lumped masses, :math:`(N)`,
+            positive.
+        y (Tensor): The signal. Differentiable.
+        time (float or Tensor): :math:`t`, one number for every channel
+            or a tensor of one value or one per channel, :math:`\geq 0`,
+            in units of area. Differentiable as a tensor.
+        solver (GravoMG or str): A :class:`GravoMG` on the points, or
+            ``'direct'``.
+        tol (float, optional): Relative residual of every Gravo MG solve.
+            (default: :obj:`1e-8`)
+        cycle (str, optional): ``'V'``, ``'W'`` or ``'F'``.
+            (default: :obj:`'V'`)
+        max_iter (int, optional): Most cycles (or iterations).
+            (default: :obj:`100`)
+        method (str, optional): ``'cycles'`` or ``'pcg'``, see
+            :meth:`GravoMG.solve`. (default: :obj:`'cycles'`)
+
+    Shapes:
+        - **input:** ``y`` :math:`(N)` or :math:`(N, C)`, ``time``
+          :math:`()`, :math:`(1)` or :math:`(C)`
+        - **output:** :math:`u` of the shape, dtype and device of ``y``
+    """
+    if not sp.issparse(stiffness) or stiffness.ndim != 2 or \
+            stiffness.shape[0] != stiffness.shape[1]:
+        raise ValueError(f"'stiffness' must be a square scipy sparse "
+                         f"matrix, e.g. from stiffness_and_mass(data), got "
+                         f"{type(stiffness).__name__} of shape "
+                         f"{getattr(stiffness, 'shape', None)}")
+    S = sp.csr_matrix(stiffness, dtype=np.float64)
+    n = S.shape[0]
+    m = mass.detach().double().cpu().numpy() if isinstance(mass, Tensor) \
+        else np.asarray(mass, dtype=np.float64)
+    if m.shape != (n, ) or not np.isfinite(m).all() or not (m > 0).all():
+        raise ValueError(f"'mass' must hold one finite positive value per "
+                         f"point ({n}), got shape {m.shape} with "
+                         f"{int((~(m > 0)).sum())} value(s) that are not "
+                         f"positive; remove unreferenced vertices and "
+                         f"degenerate triangles")
+    y = check_tensor(y, 'y')
+    if y.dim() not in (1, 2) or y.size(0) != n or not y.is_floating_point():
+        raise ValueError(f"'y' must be a float tensor of shape ({n}) or "
+                         f"({n}, C), one row per point of 'stiffness', got "
+                         f"{y.dtype} of shape {tuple(y.shape)}")
+    if not bool(torch.isfinite(y).all()):
+        raise ValueError("'y' holds NaN or infinite values; repair them "
+                         "first")
+    if isinstance(solver, str):
+        check_choice(solver, 'solver', ('direct', ))
+    elif not isinstance(solver, GravoMG):
+        raise ValueError(f"'solver' must be a GravoMG or 'direct', got "
+                         f"{type(solver).__name__}")
+    columns = y.reshape(n, -1)
+    times, weights = _as_times(time, columns.size(1))
+    if float(times.max()) > 0:
+        _check_scale(S, m, 'time', float(times.max()), on_mass=False)
+    load = torch.from_numpy(m).to(y.device)[:, None] * columns.double()
+    values, group = torch.unique(times, return_inverse=True)
+    parts, order, infos = [], [], []
+    for k, value in enumerate(values.tolist()):
+        chosen = (group == k).nonzero().flatten()
+        A = (sp.diags(m) + value * S).tocsr()
+        if isinstance(solver, GravoMG):
+            def solve(rhs: Tensor, A=A) -> Tensor:
+                out = solver.solve(A, rhs.cpu().numpy(), tol=tol,
+                                   cycle=cycle, max_iter=max_iter,
+                                   method=method)
+                return torch.from_numpy(out).to(rhs.device)
+            adjoint = solve  # A is symmetric: setup refuses any other
+        else:
+            factors = splu(A.tocsc())
+
+            def solve(rhs: Tensor, factors=factors, trans='N') -> Tensor:
+                out = factors.solve(rhs.cpu().numpy(), trans=trans)
+                return torch.from_numpy(out).to(rhs.device)
+            adjoint = partial(solve, trans='T')
+        weight = None if weights is None else \
+            weights[chosen.to(weights.device)]
+        parts.append(linear_solve(load[:, chosen.to(load.device)], solve,
+                                  adjoint, weight, _product(S)))
+        order.append(chosen)
+        if isinstance(solver, GravoMG):
+            infos.append(solver.info)
+    if infos:
+        solver.info = combined_info(infos)
+    out = torch.cat(parts, 1)[:, torch.argsort(torch.cat(order)).to(
+        y.device)]
+    return out.reshape(y.shape).to(y.dtype)
 
 
 def _flow_masses(data, robust: bool) -> np.ndarray:

@@ -1,5 +1,7 @@
 """Conversions between torch sparse tensors and scipy.sparse matrices, and
 a sparse product with a precomputed adjoint for autograd."""
+from typing import NamedTuple
+
 import numpy as np
 import scipy.sparse as sp
 import torch
@@ -48,14 +50,63 @@ def from_scipy(matrix, dtype: torch.dtype = None,
     return out.to(device) if device is not None else out
 
 
-class SparseMM(torch.autograd.Function):
-    """``A @ x`` whose backward uses a precomputed ``A^T`` (torch's own
-    backward transposes and re-sorts the sparse matrix on every call)."""
-    @staticmethod
-    def forward(ctx, matrix: Tensor, transposed: Tensor, x: Tensor):
-        ctx.transposed = transposed
-        return torch.sparse.mm(matrix, x)
+@torch.library.custom_op('tg_intrinsic::csr_mm', mutates_args=())
+def _csr_mm(crow: Tensor, col: Tensor, values: Tensor, crow_t: Tensor,
+            col_t: Tensor, values_t: Tensor, x: Tensor) -> Tensor:
+    # A custom operator, so that torch.compile calls the sparse kernel as
+    # it is (it cannot trace sparse tensors) and fuses what lies around it.
+    matrix = torch.sparse_csr_tensor(crow, col, values,
+                                     (crow.numel() - 1, x.size(0)),
+                                     check_invariants=False)
+    return torch.sparse.mm(matrix, x)
 
-    @staticmethod
-    def backward(ctx, grad_out: Tensor):
-        return None, None, torch.sparse.mm(ctx.transposed, grad_out)
+
+@_csr_mm.register_fake
+def _(crow, col, values, crow_t, col_t, values_t, x):
+    return x.new_empty(crow.size(0) - 1, x.size(1))
+
+
+def _csr_mm_context(ctx, inputs, output):
+    ctx.transposed = inputs[3:6]
+    ctx.forward = inputs[:3]
+
+
+def _csr_mm_backward(ctx, grad):
+    # d(A x)/dx^H g = A^H g: the transposed (adjoint, for complex values)
+    # matrix given, whose own adjoint is A
+    grad_x = _csr_mm(*ctx.transposed, *ctx.forward, grad.contiguous())
+    return None, None, None, None, None, None, grad_x
+
+
+_csr_mm.register_autograd(_csr_mm_backward, setup_context=_csr_mm_context)
+
+
+class CSR(NamedTuple):
+    """A CSR matrix kept as its three dense arrays: ``torch.compile`` can
+    hold those (not a sparse tensor), and :func:`sparse_mm` reads them."""
+    crow: Tensor
+    col: Tensor
+    values: Tensor
+
+    @classmethod
+    def of(cls, matrix: Tensor) -> 'CSR':
+        """The arrays of a torch sparse CSR tensor (copies: views into a
+        sparse tensor's storage confuse torch.compile's guards)."""
+        return cls(matrix.crow_indices().clone(),
+                   matrix.col_indices().clone(), matrix.values().clone())
+
+    def cast(self, dtype: torch.dtype) -> 'CSR':
+        return self._replace(values=self.values.to(dtype))
+
+    def on(self, device) -> 'CSR':
+        return CSR(*(array.to(device) for array in self))
+
+
+def sparse_mm(matrix: CSR, transposed: CSR, x: Tensor) -> Tensor:
+    """``matrix @ x`` for a :class:`CSR` ``matrix`` of ``x.size(0)``
+    columns, whose backward uses the precomputed ``transposed``
+    (:math:`A^T`, or :math:`A^H` for complex values; torch's own backward
+    transposes and re-sorts a sparse matrix on every call). The matrix is
+    constant: no gradient flows to it. A custom operator:
+    ``torch.compile`` calls the sparse kernel as it is."""
+    return _csr_mm(*matrix, *transposed, x.contiguous())

@@ -903,9 +903,12 @@ class _Problem:
             jac = jac[..., columns].reshape(num, -1, unknowns)
             weight = self.weight.expand_as(self.target).reshape(num, -1)
             weight = weight / weight.amax(1, keepdim=True).clamp_min(1e-300)
-            outer = torch.einsum('nki,nkj->nkij', jac, jac)
-            a = torch.einsum('nk,nkij->nij', weight, outer)
-            b = torch.einsum('nk,nkij->nij', weight ** 2, outer)
+            # in float64: a relative ridge of 1e-9 is below float32's
+            # resolution, and a point seen fewer times than it has unknowns
+            # then has an exactly singular matrix
+            outer = torch.einsum('nki,nkj->nkij', jac.double(), jac.double())
+            a = torch.einsum('nk,nkij->nij', weight.double(), outer)
+            b = torch.einsum('nk,nkij->nij', weight.double() ** 2, outer)
             # a relative ridge: directions no observation sees stay unknown
             # instead of failing the inverse
             ridge = 1e-9 * a.diagonal(dim1=1, dim2=2).mean(1) + 1e-300
@@ -919,7 +922,8 @@ class _Problem:
                 observed - unknowns).clamp_min(1e-300)
             variance = math.pi / 2 * sigma2 * sandwich
             return torch.where(observed > unknowns, variance,
-                               torch.full_like(variance, math.inf))
+                               torch.full_like(variance, math.inf)
+                               ).to(weight.dtype)
 
     def neighbour_spread(self) -> Tensor:
         r"""Each point's mean absolute roughness difference to its

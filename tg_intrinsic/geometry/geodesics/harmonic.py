@@ -32,12 +32,12 @@ from typing import Optional
 import torch
 from torch import Tensor
 
-from ..checks import (check_edge_index, check_float_tensor, compiling,
+from ..checks import (check_edge_index, check_float_tensor,
                       check_positive_float, check_positive_int, check_rows,
                       check_tensor, same_device)
 # A^H is what complex autograd needs in the backward pass.
 from ..precision import at_least_float32
-from ..sparse import SparseMM
+from ..sparse import CSR, sparse_mm
 
 
 def ring_weights(r: Tensor, radius: float, rings: int) -> Tensor:
@@ -237,31 +237,20 @@ class HarmonicOperator:
         col = (src.view(-1, 1, 1) * p + m_in).expand_as(row)
         slot = crow[row] + rank.view(-1, 1, 1)
         shape = (n * q_count * p * o, n * p)
-        self.matrix = _scatter_csr(crow, slot, col, values, shape)
-        # the same entries as coordinates, for graphs traced by
-        # torch.compile (which cannot hold sparse tensors)
-        self.entries = (row.reshape(-1), col.reshape(-1),
-                        values.reshape(-1))
+        self.matrix = CSR.of(_scatter_csr(crow, slot, col, values, shape))
         # A^H: row (j, M) holds the entries of source j for every M'.
         crow_t = _crow((count_j * o).repeat_interleave(p))
         slot_t = crow_t[src.view(-1, 1, 1) * p + m_in] \
             + rank_j.view(-1, 1, 1) * o + m_out
-        self.adjoint = _scatter_csr(crow_t, slot_t, row, values.conj(),
-                                    shape[::-1])
+        self.adjoint = CSR.of(_scatter_csr(crow_t, slot_t, row,
+                                           values.conj(), shape[::-1]))
 
     def aggregate(self, x: Tensor) -> Tensor:
         r"""``[N, P + 1, C]`` complex -> ``[N, Q, P + 1, O + 1, C]``."""
         check_rows(x, 'x', self.num_nodes, 'the operator')
         c = x.size(-1)
         flat = x.reshape(self.num_nodes * self.in_orders, c)
-        if compiling():  # gather and scatter the same products
-            row, col, value = self.entries
-            rows = self.num_nodes * self.rings * self.in_orders \
-                * self.out_orders
-            out = flat.new_zeros(rows, c).index_add(
-                0, row, value.unsqueeze(1) * flat[col])
-        else:
-            out = SparseMM.apply(self.matrix, self.adjoint, flat)
+        out = sparse_mm(self.matrix, self.adjoint, flat)
         return out.view(self.num_nodes, self.rings, self.in_orders,
                         self.out_orders, c)
 

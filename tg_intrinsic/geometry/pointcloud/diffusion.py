@@ -34,8 +34,8 @@ def spectral_radius(operators: SurfaceOperators, iterations: int = 60,
     (a few percent low at worst after 60 iterations; the Laplacian of MLS
     operators is not symmetric, so this is an estimate)."""
     n = operators.num_nodes
-    dtype = operators.G.dtype
-    device = operators.G.device
+    dtype = operators.G.values.dtype
+    device = operators.G.values.device
     gen = torch.Generator().manual_seed(seed)
     x = torch.randn(n, 1, generator=gen, dtype=dtype).to(device)
     x = x / x.norm()

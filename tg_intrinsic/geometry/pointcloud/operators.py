@@ -30,9 +30,9 @@ from numba import njit, prange
 from torch import Tensor
 
 from ..checks import (check_edge_index, check_float_tensor,
-                      check_positive_int, check_rows, compiling, same_device)
+                      check_positive_int, check_rows, same_device)
 from ..precision import LOW_PRECISION, full_precision
-from ..sparse import SparseMM
+from ..sparse import CSR, sparse_mm
 
 # CSR matrix products are stable for what is used here (mm with a dense
 # matrix, and its backward); the generic "beta" notice is noise for users.
@@ -179,9 +179,9 @@ class SurfaceOperators(VectorCalculus):
     dense reduction over a :math:`(N, k, C)` view.
 
     Half and bfloat16 features (``torch.autocast``, ``model.half()``) are
-    multiplied in float32 and returned in their own dtype. Traced by
-    ``torch.compile``, the products gather and scatter along the edges
-    (the same sums) instead of calling sparse kernels.
+    multiplied in float32 and returned in their own dtype. The sparse
+    products and the CPU's neighbour maximum are custom operators, which
+    ``torch.compile`` calls as they are.
 
     Args:
         edge_index (torch.Tensor): Graph the weights live on
@@ -219,14 +219,19 @@ class SurfaceOperators(VectorCalculus):
         self.in_degree = count
         self.k = int(count[0]) if n > 0 and bool((count == count[0]).all()) \
             else None
-        self.G = _block_rows(i, j, grad_weight, count, n)
-        self.D = _block_cols(i, j, div_weight, count, n)
+        self.G = CSR.of(_block_rows(i, j, grad_weight, count, n))
+        self.D = CSR.of(_block_cols(i, j, div_weight, count, n))
         by_j = torch.argsort(j, stable=True)
         count_j = torch.bincount(j, minlength=n)
-        self.G_t = _block_cols(j[by_j], i[by_j], grad_weight[by_j], count_j,
-                               n)
+        self.G_t = CSR.of(_block_cols(j[by_j], i[by_j], grad_weight[by_j],
+                                      count_j, n))
         self.out_degree = count_j
-        self.D_t = _block_rows(j[by_j], i[by_j], div_weight[by_j], count_j, n)
+        self.D_t = CSR.of(_block_rows(j[by_j], i[by_j], div_weight[by_j],
+                                      count_j, n))
+        # the adjacency (j -> i) and its transpose, for neighbor_sum
+        ones = torch.ones_like(j, dtype=grad_weight.dtype)
+        self.A = CSR(self.crow, j, ones)
+        self.A_t = CSR(_crow(count_j), i[by_j], ones)
 
     def weights_on(self, edge_index: Tensor):
         """``(grad_weight, div_weight)`` in the order of ``edge_index``,
@@ -243,30 +248,25 @@ class SurfaceOperators(VectorCalculus):
 
     def grad(self, x: Tensor) -> Tensor:
         """:math:`G x`: ``[N, C]`` -> ``[N, C, 2]``."""
-        if compiling():
-            return grad(x, self.edge_index, self.grad_weight.to(x.dtype))
         check_rows(x, 'x', self.num_nodes, 'the operators')
         out = self._product(self.G, self.G_t, x)  # [2N, C]
         return interleaved(out.view(2, self.num_nodes, -1))
 
     def div(self, v: Tensor) -> Tensor:
         """:math:`D v`: ``[N, C, 2]`` -> ``[N, C]``."""
-        if compiling():
-            return div(v, self.edge_index, self.div_weight.to(v.dtype))
         check_rows(v, 'v', self.num_nodes, 'the operators')
         flat = planar(v).reshape(2 * self.num_nodes, -1)
         return self._product(self.D, self.D_t, flat)
 
     @staticmethod
-    def _product(matrix: Tensor, transposed: Tensor, x: Tensor) -> Tensor:
+    def _product(matrix: CSR, transposed: CSR, x: Tensor) -> Tensor:
         # Sparse kernels exist for float32/64 only; autocast must not
         # lower them either.
         dtype = x.dtype
         with full_precision(x.device.type):
             if dtype in LOW_PRECISION:
                 x = x.float()
-            out = SparseMM.apply(matrix.to(x.dtype), transposed.to(x.dtype),
-                                 x)
+            out = sparse_mm(matrix.cast(x.dtype), transposed.cast(x.dtype), x)
         return out.to(dtype)
 
     def neighbor_reduce(self, x: Tensor, reduce: str = 'max') -> Tensor:
@@ -294,8 +294,6 @@ class SurfaceOperators(VectorCalculus):
         ``backend``: ``'numba'`` (CPU) or ``'torch'``; default: numba on CPU
         (torch when traced by ``torch.compile``).
         """
-        if compiling():
-            return self.edge_reduce(x[self.edge_index[0]], 'max')
         check_rows(x, 'x', self.num_nodes, 'the operators')
         j, i = self.edge_index
         c = x.size(1)
@@ -310,9 +308,7 @@ class SurfaceOperators(VectorCalculus):
                 values = x.detach()
                 if values.dtype in LOW_PRECISION:
                     values = values.float()
-                winner = torch.from_numpy(_neighbor_argmax(
-                    values.contiguous().numpy(), self.crow.numpy(),
-                    j.numpy()))
+                winner = neighbor_argmax(values, self.crow, j)
                 empty = winner < 0
                 winner = winner.clamp(min=0)
             elif self.k is not None:
@@ -333,23 +329,13 @@ class SurfaceOperators(VectorCalculus):
                 empty = first == j.numel()
                 winner = j[first.clamp(max=max(j.numel() - 1, 0))]
         out = x.gather(0, winner)
-        if empty is not None and bool(empty.any()):
+        if empty is not None:  # no data-dependent branch: compiles
             out = out.masked_fill(empty, 0.0)
         return out
 
     def neighbor_sum(self, x: Tensor) -> Tensor:
         r""":math:`\sum_{j \in \mathcal{N}(i)} x_j` over the graph."""
-        if compiling():
-            return self.edge_reduce(x[self.edge_index[0]], 'sum')
         check_rows(x, 'x', self.num_nodes, 'the operators')
-        if not hasattr(self, 'A'):
-            j = self.edge_index[0]
-            dtype = torch.float32 if x.dtype in LOW_PRECISION else x.dtype
-            ones = torch.ones(j.numel(), dtype=dtype, device=x.device)
-            self.A = torch.sparse_csr_tensor(self.crow, j, ones,
-                                             (self.num_nodes, self.num_nodes),
-                                             check_invariants=False)
-            self.A_t = self.A.t().to_sparse_csr()
         return self._product(self.A, self.A_t, x)
 
     def edge_reduce(self, values: Tensor, reduce: str = 'max') -> Tensor:
@@ -379,14 +365,13 @@ class SurfaceOperators(VectorCalculus):
         return self.edge_reduce(values, 'max')
 
     def to(self, device) -> 'SurfaceOperators':
-        for name in ('G', 'D', 'G_t', 'D_t', 'edge_index', 'crow',
-                     'out_degree', 'in_degree', 'grad_weight', 'div_weight',
-                     'source_edge_index'):
+        for name in ('G', 'D', 'G_t', 'D_t', 'A', 'A_t'):
+            setattr(self, name, getattr(self, name).on(device))
+        for name in ('edge_index', 'crow', 'out_degree', 'in_degree',
+                     'grad_weight', 'div_weight', 'source_edge_index'):
             setattr(self, name, getattr(self, name).to(device))
         self.source_weights = tuple(w.to(device)
                                     for w in self.source_weights)
-        for name in ('A', 'A_t'):  # rebuilt on demand by neighbor_sum
-            self.__dict__.pop(name, None)
         return self
 
     def __repr__(self) -> str:
@@ -428,6 +413,21 @@ def _block_cols(row: Tensor, col: Tensor, value: Tensor, count: Tensor,
     values[first], values[second] = value[:, 0], value[:, 1]
     return torch.sparse_csr_tensor(2 * crow, cols, values, (n, 2 * n),
                                    check_invariants=False)
+
+
+@torch.library.custom_op('tg_intrinsic::neighbor_argmax', mutates_args=())
+def neighbor_argmax(x: Tensor, crow: Tensor, neighbor: Tensor) -> Tensor:
+    """Per point and channel of ``x`` (CPU), the neighbour holding the
+    maximum over the CSR graph ``crow``/``neighbor`` (the first on ties),
+    -1 for points without neighbours: a numba sweep, as a custom operator
+    that ``torch.compile`` calls as it is."""
+    return torch.from_numpy(_neighbor_argmax(
+        x.contiguous().numpy(), crow.numpy(), neighbor.numpy()))
+
+
+@neighbor_argmax.register_fake
+def _(x, crow, neighbor):
+    return x.new_empty(crow.size(0) - 1, x.size(1), dtype=torch.long)
 
 
 @njit(cache=True, parallel=True)

@@ -14,7 +14,12 @@ sets goals for, each beside the CPU where it has one, into
 5. ``tg-intrinsic svbrdf`` with refinement on a 2562-point, 25-view
    capture, on the device and on the CPU (report.json's stage times);
 6. a DeltaNet epoch of the SHREC'11 protocol's size (300 shapes x 2048
-   points, batch 16) and an HSN epoch, with ``tg-intrinsic train``.
+   points, batch 16) and an HSN epoch, with ``tg-intrinsic train``;
+7. PyG's machinery on a training step of DeltaNet (32 x 1024 points) and
+   HSN (SyntheticSHREC batches of hsn-shrec11): eager float32 against
+   ``torch.compile(dynamic=True)``, autocast float16 and bfloat16, and
+   compiled under bfloat16 (step time and the logits' largest difference
+   relative to the largest logit).
 
 Runs from a plain copy of the repository (``PYTHONPATH=. python
 benchmarks/gpu.py``). ``--device cpu --quick`` checks the script on a
@@ -123,6 +128,50 @@ def networks(device):
             'deltanet_vs_dgcnn': theirs / ours}
 
 
+def machinery(device, quick, folder):
+    from compile_precision import batches_of
+    from deltaconv_speed import K, clouds
+    from tg_intrinsic.nn.models import DeltaNetClassification
+    from tg_intrinsic import train as training
+    torch.manual_seed(0)
+    hsn_batches, source, args = batches_of('hsn', 'classification', folder,
+                                           4, quick=True)
+    cases = {'deltanet': (DeltaNetClassification(3, 10, k=K),
+                          [clouds().to(device)]),
+             'hsn': (training.build_model('hsn', source.num_classes, args),
+                     [b.to(device) for b in hsn_batches])}
+    arms = {'eager': (False, None), 'compiled': (True, None),
+            'fp16': (False, torch.float16), 'bf16': (False, torch.bfloat16),
+            'compiled_bf16': (True, torch.bfloat16)}
+    out = {}
+    for name, (model, batches) in cases.items():
+        model = model.to(device)
+        compiled = torch.compile(model, dynamic=True)
+        model.eval()
+        with torch.no_grad():
+            reference = model(batches[0]).float()
+        for arm, (compile_it, dtype) in arms.items():
+            net = compiled if compile_it else model
+
+            def run():
+                with torch.autocast(device.type, dtype=dtype or torch.float32,
+                                    enabled=dtype is not None):
+                    return net(batches[0]).float()
+
+            def step():
+                model.train()
+                model.zero_grad()
+                torch.nn.functional.cross_entropy(
+                    run(), batches[0].y.view(-1)).backward()
+            out[f'{name}_{arm}_step_s'] = timed(step, device)
+            model.eval()
+            with torch.no_grad():
+                out[f'{name}_{arm}_logits_gap'] = float(
+                    (run() - reference).abs().max() / reference.abs().max())
+        torch._dynamo.reset()
+    return out
+
+
 def uncertainty(device, quick):
     from tg_intrinsic.geometry.appearance.brdf import spectral_uncertainty
     n = 10_000 if quick else 100_000
@@ -210,7 +259,9 @@ def main(argv=None):
                 ('networks', lambda: networks(device)),
                 ('uncertainty', lambda: uncertainty(device, args.quick)),
                 ('svbrdf', lambda: svbrdf(device, args.quick, folder)),
-                ('epochs', lambda: epochs(device, args.quick, folder))):
+                ('epochs', lambda: epochs(device, args.quick, folder)),
+                ('machinery', lambda: machinery(device, args.quick,
+                                                folder))):
             begin = time.perf_counter()
             try:
                 results[name] = step()

@@ -797,6 +797,31 @@ def gravo_diffusion(d, _):
              'MG vs the sparse LU', 'gravo_diffusion.py', result)]
 
 
+@rows_for('compile_precision')
+def compile_precision(d, _):
+    parts = []
+    for name, row in d['speed'].items():
+        model, task = name.split('_', 1)
+        parts.append(
+            f"{model} {task}: compiled {times(row['compiled_speedup'])}, "
+            f"bf16 {times(row['bf16_speedup'])}, both "
+            f"{times(row['compiled_bf16_speedup'])} (logits within "
+            f"{pct(row['bf16_logits_gap'], 1)})")
+    accuracy = '; '.join(
+        f"{name} {pct(run['32-true'], 1)} (float32) vs "
+        f"{pct(run['bf16-mixed'], 1)} (bf16-mixed), "
+        f"**{run['points_apart']:.1f} points apart**"
+        for name, run in d['accuracy'].items())
+    quick = ' (quick smoke run)' if d.get('quick') else ''
+    result = (f"training step over eager float32{quick}, "
+              f"{d['threads']} threads, {d['conditions']}: "
+              + '; '.join(parts) + f". Final test accuracy: {accuracy} "
+              f"(goal: within 1 point)")
+    return [('torch.compile and bfloat16 autocast: DeltaNet and HSN training '
+             'steps against eager float32, the accuracy of bf16-mixed '
+             'training', 'compile_precision.py', result)]
+
+
 @rows_for('hsn_accuracy')
 def hsn_accuracy(d, _):
     parts = []

@@ -14,7 +14,7 @@ README = os.path.join(ROOT, 'README.md')
 # the pages whose Python blocks run, in the site's order
 PAGES = [README] + [os.path.join(ROOT, 'docs', page) for page in (
     'getting_started.md', 'methods/deltaconv.md', 'methods/hsn.md',
-    'methods/gravo_mg.md', 'methods/svbrdf.md')]
+    'methods/gravo_mg.md', 'methods/svbrdf.md', 'pyg_integration.md')]
 
 
 def blocks(path, language):
@@ -86,6 +86,12 @@ PROMISES = {
         ns['n'], 16) and ns['fine'].shape == ns['surface'].pos.shape,
     'docs/methods/svbrdf.md': lambda ns, tmp: (
         tmp / 'runs' / 'svbrdf' / 'maps.npz').exists(),
+    'docs/pyg_integration.md': lambda ns, tmp: (
+        ns['sizes'] == [100, 100]
+        and ns['edge_importance'].shape == (ns['data'].num_edges, )
+        and ns['edge_importance'].std() > 0
+        and ns['logits'].shape == (8, 2)
+        and ns['diffusion'].diffusion_time.grad is not None),
 }
 
 

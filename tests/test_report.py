@@ -367,3 +367,20 @@ def test_the_gravo_diffusion_row_follows_its_numbers(copies):
     assert len(changed) == 1
     assert '**Gravo MG 2.0x slower per step**' in changed[0]
     assert 'learned times within 3.21% (Gravo MG)' in changed[0]
+
+
+def test_the_compile_precision_row_follows_its_numbers(copies):
+    results, _ = copies
+    before = report.build_table(str(results))
+
+    def slower_compile(data):
+        data['speed']['deltanet_classification']['compiled_speedup'] = 0.5
+        data['accuracy']['hsn']['points_apart'] = 12.34
+
+    edit(results / 'compile_precision.json', slower_compile)
+    after = report.build_table(str(results))
+    changed = [line for line in after.split('\n')
+               if line not in before.split('\n')]
+    assert len(changed) == 1
+    assert 'deltanet classification: compiled 0.5x' in changed[0]
+    assert '**12.3 points apart**' in changed[0]

@@ -196,6 +196,11 @@ def build_mls_operators(pos: Tensor, k: int = 20,
     the MLS weights of :func:`mls_grad_div`. Runs on the device of
     :obj:`pos`, so a model can rebuild its operators after augmentation.
 
+    With :obj:`normalized=True` (the default, DeltaNet's convention) the
+    gradient is divided by the largest absolute row sum of :math:`G`: a
+    scale for a network's layers, not the gradient of the field; pass
+    :obj:`normalized=False` to measure gradients.
+
     Returns:
         (edge_index, frame, grad_weight, div_weight) with shapes
         :math:`(2, N k)`, :math:`(N, 3, 3)`, :math:`(N k, 2)`,

@@ -63,7 +63,9 @@ class DeltaConv(MessagePassing):
             :obj:`False` in a last layer that only feeds scalars on; then the
             scalar stream reads the incoming :math:`\mathbf{v}`.
             (default: :obj:`True`)
-        aggr (str, optional): Aggregation of :math:`h_2`.
+        aggr (str, optional): Aggregation of :math:`h_2`, any of PyG's
+            (:obj:`"max"`, :obj:`"mean"`, :obj:`"sum"`, :obj:`"min"` are
+            reduced without per-edge messages on the operators' graph).
             (default: :obj:`"max"`)
         vector_input (bool, optional): Whether the layer receives a vector
             stream. :obj:`False` (with :obj:`vector=False`) gives the

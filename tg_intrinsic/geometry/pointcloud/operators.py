@@ -212,7 +212,6 @@ class SurfaceOperators(VectorCalculus):
             j, i = j[order], i[order]
             grad_weight, div_weight = grad_weight[order], div_weight[order]
         self.edge_index = torch.stack([j, i])
-        self.grad_weight, self.div_weight = grad_weight, div_weight
         self.num_nodes = n
         count = torch.bincount(i, minlength=n)
         self.crow = _crow(count)
@@ -368,7 +367,7 @@ class SurfaceOperators(VectorCalculus):
         for name in ('G', 'D', 'G_t', 'D_t', 'A', 'A_t'):
             setattr(self, name, getattr(self, name).on(device))
         for name in ('edge_index', 'crow', 'out_degree', 'in_degree',
-                     'grad_weight', 'div_weight', 'source_edge_index'):
+                     'source_edge_index'):
             setattr(self, name, getattr(self, name).to(device))
         self.source_weights = tuple(w.to(device)
                                     for w in self.source_weights)

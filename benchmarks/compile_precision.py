@@ -37,7 +37,10 @@ from tg_intrinsic.io.figures import save_figure  # noqa: E402
 from tg_intrinsic.utils import atomic_write_json, machine_info  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ARMS = ('eager', 'compiled', 'bf16', 'compiled_bf16')
+#: arm -> (compiled, precision); the first is the baseline
+ARMS = {'eager': (False, '32-true'), 'compiled': (True, '32-true'),
+        'bf16': (False, 'bf16-mixed'), 'compiled_bf16': (True, 'bf16-mixed')}
+CPU = torch.device('cpu')
 CONFIGS = (('deltanet', 'classification'), ('deltanet', 'segmentation'),
            ('hsn', 'classification'), ('hsn', 'segmentation'))
 
@@ -61,26 +64,36 @@ def batches_of(model_name, task, root, count, quick):
     return [batches[i % len(batches)] for i in range(count)], source, args
 
 
+def train_step(model, forward, batch, precision, device, optimizer=None):
+    """One training step of ``model`` through ``forward`` (the model or
+    its compiled version) at ``precision``."""
+    model.train()
+    (optimizer or model).zero_grad()
+    with training.autocast(precision, device):
+        out = forward(batch)
+    F.cross_entropy(out.float(), batch.y.view(-1)).backward()
+    if optimizer is not None:
+        optimizer.step()
+
+
+def logits_gap(model, forward, batch, precision, reference, device):
+    """The largest difference of the eval-mode logits from ``reference``,
+    relative to its largest logit."""
+    model.eval()
+    with torch.no_grad(), training.autocast(precision, device):
+        out = forward(batch).float()
+    return float((out - reference.float()).abs().max()
+                 / reference.abs().max())
+
+
 def time_steps(model, forward, batches, precision):
     optimizer = torch.optim.SGD(model.parameters(), lr=1e-4)
     seconds = []
-    model.train()
     for batch in [batches[0]] + batches:   # the first warms up (compiles)
         start = time.perf_counter()
-        optimizer.zero_grad()
-        with training.autocast(precision, torch.device('cpu')):
-            out = forward(batch)
-        F.cross_entropy(out.float(), batch.y.view(-1)).backward()
-        optimizer.step()
+        train_step(model, forward, batch, precision, CPU, optimizer)
         seconds.append(time.perf_counter() - start)
     return statistics.median(seconds[1:])
-
-
-def logits_gap(model, forward, batch, precision, reference):
-    model.eval()
-    with torch.no_grad(), training.autocast(precision, torch.device('cpu')):
-        out = forward(batch).float()
-    return float((out - reference).abs().max() / reference.abs().max())
 
 
 def measure(model_name, task, root, steps, quick):
@@ -89,23 +102,20 @@ def measure(model_name, task, root, steps, quick):
     model = training.build_model(model_name, source.num_classes, args)
     state = {k: v.clone() for k, v in model.state_dict().items()}
     compiled = torch.compile(model, dynamic=True)
-    forwards = {'eager': model, 'compiled': compiled, 'bf16': model,
-                'compiled_bf16': compiled}
-    precisions = {'eager': '32-true', 'compiled': '32-true',
-                  'bf16': 'bf16-mixed', 'compiled_bf16': 'bf16-mixed'}
     row = {'batch_size': batches[0].num_graphs, 'steps': steps,
            'points_per_batch': batches[0].num_nodes}
     model.eval()
     with torch.no_grad():
         reference = model(batches[0])
-    for arm in ARMS:
+    for arm, (compile_it, precision) in ARMS.items():
+        forward = compiled if compile_it else model
         model.load_state_dict(state)   # every arm from the same weights
-        row[f'{arm}_step_seconds'] = time_steps(
-            model, forwards[arm], batches, precisions[arm])
+        row[f'{arm}_step_seconds'] = time_steps(model, forward, batches,
+                                                precision)
         model.load_state_dict(state)
         row[f'{arm}_logits_gap'] = logits_gap(
-            model, forwards[arm], batches[0], precisions[arm], reference)
-    for arm in ARMS[1:]:
+            model, forward, batches[0], precision, reference, CPU)
+    for arm in list(ARMS)[1:]:
         row[f'{arm}_speedup'] = row['eager_step_seconds'] / \
             row[f'{arm}_step_seconds']
     torch._dynamo.reset()
@@ -143,7 +153,7 @@ def plot(results, path):
     fig, ax = plt.subplots(figsize=(7.5, 3.6))
     names = [f'{m}\n{t}' for m, t in CONFIGS]
     width = 0.27
-    for k, arm in enumerate(ARMS[1:]):
+    for k, arm in enumerate(list(ARMS)[1:]):
         values = [results['speed'][f'{m}_{t}'][f'{arm}_speedup']
                   for m, t in CONFIGS]
         ax.bar([i + (k - 1) * width for i in range(len(names))], values,

@@ -129,49 +129,36 @@ def networks(device):
 
 
 def machinery(device, quick, folder):
-    from compile_precision import batches_of
+    from compile_precision import ARMS, batches_of, logits_gap, train_step
     from deltaconv_speed import K, clouds
-    from tg_intrinsic.nn.models import DeltaNetClassification
     from tg_intrinsic import train as training
+    from tg_intrinsic.nn.models import DeltaNetClassification
     torch.manual_seed(0)
     hsn_batches, source, args = batches_of('hsn', 'classification', folder,
                                            4, quick=True)
     cases = {'deltanet': (DeltaNetClassification(3, 10, k=K),
-                          [clouds().to(device)]),
+                          clouds().to(device)),
              'hsn': (training.build_model('hsn', source.num_classes, args),
-                     [b.to(device) for b in hsn_batches])}
-    arms = {'eager': (False, None), 'compiled': (True, None),
-            'fp16': (False, torch.float16), 'bf16': (False, torch.bfloat16),
-            'compiled_bf16': (True, torch.bfloat16)}
-    if device.type != 'cuda':   # float16 autocast is a GPU's (train too)
-        del arms['fp16']
+                     hsn_batches[0].to(device))}
+    arms = dict(ARMS)
+    if device.type == 'cuda':   # float16 autocast is a GPU's (train too)
+        arms['fp16'] = (False, '16-mixed')
     out = {}
-    for name, (model, batches) in cases.items():
+    for name, (model, batch) in cases.items():
         model = model.to(device)
         state = {k: v.clone() for k, v in model.state_dict().items()}
         compiled = torch.compile(model, dynamic=True)
         model.eval()
         with torch.no_grad():
-            reference = model(batches[0]).float()
-        for arm, (compile_it, dtype) in arms.items():
-            net = compiled if compile_it else model
-
-            def run():
-                with torch.autocast(device.type, dtype=dtype or torch.float32,
-                                    enabled=dtype is not None):
-                    return net(batches[0]).float()
-
-            def step():
-                model.train()
-                model.zero_grad()
-                torch.nn.functional.cross_entropy(
-                    run(), batches[0].y.view(-1)).backward()
+            reference = model(batch)
+        for arm, (compile_it, precision) in arms.items():
+            forward = compiled if compile_it else model
             model.load_state_dict(state)  # the batch norms' statistics too
-            model.eval()
-            with torch.no_grad():
-                out[f'{name}_{arm}_logits_gap'] = float(
-                    (run() - reference).abs().max() / reference.abs().max())
-            out[f'{name}_{arm}_step_s'] = timed(step, device)
+            out[f'{name}_{arm}_logits_gap'] = logits_gap(
+                model, forward, batch, precision, reference, device)
+            out[f'{name}_{arm}_step_s'] = timed(
+                lambda: train_step(model, forward, batch, precision, device),
+                device)
         torch._dynamo.reset()
     return out
 

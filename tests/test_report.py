@@ -41,6 +41,14 @@ def edit(path, change):
         json.dump(data, f)
 
 
+def changed_lines(results, before):
+    """The rows of the table built from ``results`` that ``before`` (an
+    earlier table) lacks."""
+    after = report.build_table(str(results))
+    return [line for line in after.split('\n')
+            if line not in before.split('\n')]
+
+
 def test_readme_matches_the_results():
     run = subprocess.run([sys.executable, SCRIPT, '--check'],
                          capture_output=True, text=True)
@@ -170,9 +178,7 @@ def test_the_correspondence_row_follows_its_curves(copies):
         run['within_0.05'] = 0.987
 
     edit(results / 'hsn_correspondence.json', better_hsn)
-    after = report.build_table(str(results))
-    changed = [line for line in after.split('\n')
-               if line not in before.split('\n')]
+    changed = changed_lines(results, before)
     assert len(changed) == 1 and '**98.7% within 0.05**' in changed[0]
 
 
@@ -191,9 +197,7 @@ def test_sphere_digits_and_perona_malik_rows_follow_their_numbers(copies):
 
     edit(results / 'sphere_digits.json', worse_turned)
     edit(results / 'perona_malik.json', better_delta)
-    after = report.build_table(str(results))
-    changed = [line for line in after.split('\n')
-               if line not in before.split('\n')]
+    changed = changed_lines(results, before)
     assert len(changed) == 2
     assert 'trained upright: **turned test 12.3% vs' in changed[0]
     assert '**DeltaConv 0.05** vs' in changed[1]
@@ -209,9 +213,7 @@ def test_the_ddp_training_row_follows_its_numbers(copies):
         rows[2]['epoch_seconds'] = rows[0]['epoch_seconds'] / 1.5
 
     edit(results / 'ddp_training.json', slower_two_processes)
-    after = report.build_table(str(results))
-    changed = [line for line in after.split('\n')
-               if line not in before.split('\n')]
+    changed = changed_lines(results, before)
     assert len(changed) == 1 and 'deltanet' in changed[0]
     assert 'speed-up 1.50x over 1 process x 2 threads' in changed[0]
 
@@ -228,9 +230,7 @@ def test_the_out_of_core_row_follows_its_numbers(copies):
         data['preparation']['identical'] = False
 
     edit(results / 'out_of_core.json', grown)
-    after = report.build_table(str(results))
-    changed = [line for line in after.split('\n')
-               if line not in before.split('\n')]
+    changed = changed_lines(results, before)
     assert len(changed) == 1
     assert ', 98765 MB (' in changed[0]
     assert 'identical databases: NO' in changed[0]
@@ -248,9 +248,7 @@ def test_the_gravo_scale_row_follows_its_numbers(copies):
         compared['poisson']['ours']['added_mb_per_million'] = 4321
 
     edit(results / 'gravo_scale.json', slower_and_larger)
-    after = report.build_table(str(results))
-    changed = [line for line in after.split('\n')
-               if line not in before.split('\n')]
+    changed = changed_lines(results, before)
     assert len(changed) == 1 and 'gravo_scale.py' in changed[0]
     assert '**1.37x**' in changed[0] and '4321 vs' in changed[0]
 
@@ -361,9 +359,7 @@ def test_the_gravo_diffusion_row_follows_its_numbers(copies):
         gravo['max_time_error'] = 0.0321
 
     edit(results / 'gravo_diffusion.json', slower_gravo)
-    after = report.build_table(str(results))
-    changed = [line for line in after.split('\n')
-               if line not in before.split('\n')]
+    changed = changed_lines(results, before)
     assert len(changed) == 1
     assert '**Gravo MG 2.0x slower per step**' in changed[0]
     assert 'learned times within 3.21% (Gravo MG)' in changed[0]
@@ -378,9 +374,7 @@ def test_the_compile_precision_row_follows_its_numbers(copies):
         data['accuracy']['hsn']['points_apart'] = 12.34
 
     edit(results / 'compile_precision.json', slower_compile)
-    after = report.build_table(str(results))
-    changed = [line for line in after.split('\n')
-               if line not in before.split('\n')]
+    changed = changed_lines(results, before)
     assert len(changed) == 1
     assert 'deltanet classification: compiled 0.5x' in changed[0]
     assert '**12.3 points apart**' in changed[0]

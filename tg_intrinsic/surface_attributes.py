@@ -180,8 +180,8 @@ def operator_graph(edge_index: Tensor, num_nodes: int,
     if batch is None:
         batch = torch.zeros(num_nodes, dtype=torch.long, device=device)
     num_graphs = int(batch.max()) + 1 if batch.numel() > 0 else 1
-    node_start = torch.cumsum(torch.bincount(batch, minlength=num_graphs),
-                              0) - torch.bincount(batch, minlength=num_graphs)
+    nodes = torch.bincount(batch, minlength=num_graphs)
+    node_start = torch.cumsum(nodes, 0) - nodes
     graph = batch[i]
     edges = torch.bincount(graph, minlength=num_graphs)
     edge_start = torch.cumsum(edges, 0) - edges

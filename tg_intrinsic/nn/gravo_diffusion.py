@@ -220,7 +220,8 @@ class GravoDiffusion(torch.nn.Module):
         return entry[2]
 
     def __getstate__(self):
-        # the cached LU factors cannot be pickled; they are rebuilt
+        # the cached operators and hierarchies (scipy and GravoMG objects)
+        # stay out of a pickle; they are rebuilt on first use
         state = self.__dict__.copy()
         state['_surfaces'] = OrderedDict()
         return state

@@ -91,6 +91,20 @@ def _product(matrix: sp.spmatrix):
     return apply
 
 
+def _gravo_solve(solver: GravoMG, matrix: sp.csr_matrix, tol: float,
+                 cycle: str, max_iter: int, method: str):
+    """rhs -> the solution of ``matrix x = rhs`` by ``solver`` (all
+    columns in one block solve, so ``solver.info`` describes it; not
+    converging warns there), on the CPU, back on rhs's device. The
+    matrices here are symmetric (:meth:`GravoMG.setup` refuses any
+    other), so it is its own adjoint."""
+    def solve(rhs: Tensor) -> Tensor:
+        out = solver.solve(matrix, rhs.cpu().numpy(), tol=tol, cycle=cycle,
+                           max_iter=max_iter, method=method)
+        return torch.from_numpy(out).to(rhs.device)
+    return solve
+
+
 def _solve(data, matrix, mass, y, solver, tol, ratio, lower_bound, cycle,
            max_iter, method, weight=None, direction=None):
     """Solves ``matrix x = M y`` on the CPU, differentiable with respect
@@ -111,16 +125,7 @@ def _solve(data, matrix, mass, y, solver, tol, ratio, lower_bound, cycle,
         solver = _default_solver(data, ratio, lower_bound)
     load = torch.from_numpy(mass).to(y.device)[:, None] * \
         y.double().reshape(mass.size, -1)
-
-    def solve(rhs: Tensor) -> Tensor:
-        # All channels at once: one block solve, so solver.info describes
-        # it. Not converging warns there (ConvergenceWarning).
-        out = solver.solve(matrix, rhs.cpu().numpy(), tol=tol, cycle=cycle,
-                           max_iter=max_iter, method=method)
-        return torch.from_numpy(out).to(rhs.device)
-
-    # Every matrix here is symmetric (GravoMG.setup refuses any other), so
-    # the adjoint solve is the same solve.
+    solve = _gravo_solve(solver, matrix, tol, cycle, max_iter, method)
     out = linear_solve(load, solve, weight=weight, direction=direction)
     return out.reshape(y.shape).to(y.dtype)
 
@@ -520,12 +525,8 @@ def diffuse(stiffness: sp.spmatrix, mass, y: Tensor, time,
         chosen = (group == k).nonzero().flatten()
         A = (sp.diags(m) + value * S).tocsr()
         if isinstance(solver, GravoMG):
-            def solve(rhs: Tensor, A=A) -> Tensor:
-                out = solver.solve(A, rhs.cpu().numpy(), tol=tol,
-                                   cycle=cycle, max_iter=max_iter,
-                                   method=method)
-                return torch.from_numpy(out).to(rhs.device)
-            adjoint = solve  # A is symmetric: setup refuses any other
+            solve = adjoint = _gravo_solve(solver, A, tol, cycle, max_iter,
+                                           method)
         else:
             factors = splu(A.tocsc())
 

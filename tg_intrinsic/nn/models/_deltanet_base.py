@@ -96,17 +96,6 @@ class DeltaNetBase(torch.nn.Module):
         return out
 
 
-def graph_batch(data: Data, x: Tensor) -> Tuple[Tensor, int]:
-    """The example index of every point and the number of examples (from
-    a :class:`~torch_geometric.data.Batch`'s own count where it has one,
-    so that ``torch.compile`` reads no tensor value)."""
-    batch = getattr(data, 'batch', None)
-    if batch is None:
-        return torch.zeros(x.size(0), dtype=torch.long, device=x.device), 1
-    size = getattr(data, 'num_graphs', None)
-    return batch, int(batch.max()) + 1 if size is None else size
-
-
 def category_one_hot(category: Optional[Tensor], num_categories: int,
                      size: int, x: Tensor) -> Tensor:
     """``data.category`` of a segmentation model built with

@@ -12,6 +12,7 @@ from tg_intrinsic.nn.harmonic_resnet_block import (COMPLEX_NORMS,
                                                    DEFAULT_COMPLEX_NORM,
                                                    harmonic_operators,
                                                    norm_repr)
+from tg_intrinsic.nn.models._batches import graph_batch
 from tg_intrinsic.surface_attributes import check_operator_graph
 
 
@@ -70,13 +71,13 @@ def level_operators(data: Data, level: int, num_nodes: int,
 def level_batch(data: Data, level: int, size: int, like: Tensor
                 ) -> Tuple[Tensor, int]:
     """The shape index of every point of level ``level`` (``size`` points)
-    and the number of shapes: from a batch, or zeros and 1 for a single
-    shape."""
-    shapes = getattr(data, 'num_graphs', None) or 1
+    and the number of shapes (:func:`graph_batch` of level 0, ``like``
+    its features)."""
+    batch, shapes = graph_batch(data, like)
+    if level == 0:
+        return batch, shapes
     if hasattr(data, 'level_batch'):
         return data.level_batch(level), shapes
-    if level == 0 and getattr(data, 'batch', None) is not None:
-        return data.batch, shapes
     return torch.zeros(size, dtype=torch.long, device=like.device), shapes
 
 

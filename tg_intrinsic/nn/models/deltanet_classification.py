@@ -9,7 +9,8 @@ from tg_intrinsic.geometry.checks import check_positive_int, compiling
 from tg_intrinsic.nn.delta_conv import scalar_mlp
 from tg_intrinsic.pool.global_max_pool import (dense_max_pool,
                                                global_max_pool)
-from tg_intrinsic.nn.models._deltanet_base import DeltaNetBase, graph_batch
+from tg_intrinsic.nn.models._batches import graph_batch
+from tg_intrinsic.nn.models._deltanet_base import DeltaNetBase
 from tg_intrinsic.nn.models._embedding_pool import can_fuse, embed_and_pool
 
 

@@ -7,7 +7,8 @@ from torch_geometric.data import Data
 from tg_intrinsic.geometry.checks import check_positive_int
 from tg_intrinsic.nn.delta_conv import scalar_mlp
 from tg_intrinsic.pool.global_max_pool import global_max_pool
-from tg_intrinsic.nn.models._deltanet_base import (DeltaNetBase, graph_batch,
+from tg_intrinsic.nn.models._batches import graph_batch
+from tg_intrinsic.nn.models._deltanet_base import (DeltaNetBase,
                                                    category_one_hot)
 
 

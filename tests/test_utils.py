@@ -152,3 +152,41 @@ def test_machine_info_reports_this_machine():
         if torch.cuda.is_available() else None
     assert info['cuda'] == expected_cuda
     json.dumps(info)  # recorded next to every benchmark: serialisable
+
+
+@pytest.mark.parametrize('calls', [1, 2, 3, 5])
+def test_a_ctrl_c_while_saving_stays_a_ctrl_c(tmp_path, monkeypatch, calls):
+    """Ctrl-C arrives during the ``calls``-th write: a KeyboardInterrupt
+    (the command stops), not torch's RuntimeError from inside its writer
+    (the command took it for a bad file and went on); no file is left."""
+    real_fdopen = os.fdopen
+
+    class Interrupted:
+        def __init__(self, f):
+            self.f, self.calls = f, 0
+
+        def write(self, data):
+            self.calls += 1
+            if self.calls == calls:   # Ctrl-C pressed during this write
+                raise KeyboardInterrupt
+            return self.f.write(data)
+
+        def __getattr__(self, name):
+            return getattr(self.f, name)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.f.close()
+
+    monkeypatch.setattr(os, 'fdopen',
+                        lambda *a, **k: Interrupted(real_fdopen(*a, **k)))
+    saved = {'x': torch.zeros(1000), 'y': torch.ones(9)}
+    try:
+        atomic_torch_save(saved, str(tmp_path / 'a.pt'))
+    except KeyboardInterrupt:
+        assert os.listdir(tmp_path) == []
+    else:   # fewer writes than ``calls``: no Ctrl-C came
+        loaded = torch.load(tmp_path / 'a.pt')
+        assert all(torch.equal(loaded[k], saved[k]) for k in saved)

@@ -1,5 +1,6 @@
 """Small I/O helpers: outputs are written atomically (temp file + rename), so
 an interrupted run never leaves a half-written result or checkpoint."""
+import io
 import json
 import os
 import platform
@@ -22,8 +23,10 @@ def _temporary_beside(path: str, make_folder: bool):
     if make_folder:
         os.makedirs(folder, exist_ok=True)
     try:
+        # the name's end (its extension) tells it apart; all of a long
+        # name would not fit beside the prefix
         return tempfile.mkstemp(dir=folder, prefix=TEMPORARY_PREFIX,
-                                suffix=os.path.basename(path))
+                                suffix=os.path.basename(path)[-64:])
     except (FileNotFoundError, NotADirectoryError):
         if os.path.isdir(folder):
             raise
@@ -35,11 +38,16 @@ def _temporary_beside(path: str, make_folder: bool):
             f"elsewhere") from None
 
 
-def _move_into_place(temporary: str, path: str):
-    # mkstemp creates 0600 files; give the result the usual permissions.
+def current_umask() -> int:
+    """The process's umask (read by setting it and putting it back)."""
     umask = os.umask(0)
     os.umask(umask)
-    os.chmod(temporary, 0o666 & ~umask)
+    return umask
+
+
+def _move_into_place(temporary: str, path: str):
+    # mkstemp creates 0600 files; give the result the usual permissions.
+    os.chmod(temporary, 0o666 & ~current_umask())
     os.replace(temporary, path)
 
 
@@ -103,7 +111,15 @@ def atomic_write_json(path: str, obj: Any):
 
 def atomic_torch_save(obj: Any, path: str):
     """``torch.save`` that never leaves a truncated file behind."""
-    atomic_write(path, lambda f: torch.save(obj, f), 'wb')
+    # Serialised in memory first: while torch writes into a Python file
+    # object, a Ctrl-C surfaces as torch's RuntimeError ("enforce fail at
+    # inline_container.cc") instead of KeyboardInterrupt, and the command
+    # would take it for a bad file and go on. (Saving by file name would
+    # put the random temporary name into the archive, and the bytes would
+    # differ from run to run.)
+    buffer = io.BytesIO()
+    torch.save(obj, buffer)
+    atomic_write(path, lambda f: f.write(buffer.getbuffer()), 'wb')
 
 
 def machine_info() -> dict:

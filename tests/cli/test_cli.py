@@ -1,6 +1,9 @@
 """The command line as a whole (tg_intrinsic.cli's entry point): help,
 dispatch, how a failure ends (exit codes 2, 1, 130, one line), warnings
 on one line, and --debug."""
+import errno
+import os
+import signal
 import subprocess
 import sys
 
@@ -47,6 +50,10 @@ def test_debug_shows_the_traceback(capsys):
      ['tg-intrinsic info: error: first line second line']),
     (KeyboardInterrupt(), 130,
      ['tg-intrinsic info: interrupted; no file was left half-written']),
+    (OSError(errno.ENOSPC, 'No space left on device', '/runs/x.ply'), 2,
+     ["tg-intrinsic info: error: '/runs/x.ply': no space left on device"]),
+    (OSError(errno.ENAMETOOLONG, 'File name too long', 'a' * 300), 2,
+     ["tg-intrinsic info: error: 'aaa", "': file name too long"]),
     (RuntimeError('boom'), 1,
      ['tg-intrinsic info: unexpected RuntimeError: boom', '--debug',
       'please report it']),
@@ -82,3 +89,25 @@ def test_warnings_are_one_line_unless_debugging(capsys, monkeypatch):
     with pytest.warns(RuntimeWarning, match='did not'):
         assert main(['info', '--debug']) == 0
     assert warnings.showwarning.__module__ != 'tg_intrinsic.cli'  # restored
+
+
+@pytest.mark.parametrize('signum', [signal.SIGTERM, signal.SIGHUP])
+def test_a_stop_signal_ends_like_ctrl_c(tmp_path, capsys, monkeypatch,
+                                        signum):
+    """``kill`` (or a closed terminal) in the middle of writing results:
+    exit 128 + the signal, the staging folder removed, nothing in place."""
+    from tg_intrinsic.cli import info
+    from tg_intrinsic.io.results import result_folder
+
+    def killed_while_writing(args):
+        with result_folder(str(tmp_path / 'out'), 'info') as staging:
+            open(os.path.join(staging, 'a.txt'), 'w').close()
+            os.kill(os.getpid(), signum)
+
+    monkeypatch.setattr(info, 'run', killed_while_writing)
+    before = signal.getsignal(signum)
+    code, _, err = run_cli(capsys, 'info')
+    assert code == 128 + signum
+    assert f'stopped by {signal.Signals(signum).name}' in err
+    assert os.listdir(tmp_path) == []
+    assert signal.getsignal(signum) == before   # the handler put back

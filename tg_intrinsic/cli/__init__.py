@@ -9,18 +9,45 @@ traceback instead.
 """
 import argparse
 import importlib
+import signal
 import sys
+import threading
 import warnings
 from typing import List, Optional
 
-from .common import ArgumentParser, common_options, one_line
+from .common import ArgumentParser, common_options, one_line, user_message
 
 COMMANDS = ('demo', 'train', 'precompute', 'solve', 'svbrdf', 'info')
 
 # Errors that mean "the input or the request is wrong", not "the library
-# is broken": reported on one line with exit code 2.
-USER_ERRORS = (ValueError, FileNotFoundError, IsADirectoryError,
-               NotADirectoryError, PermissionError)
+# is broken": reported on one line with exit code 2. Every OSError is one
+# (a file missing or unreadable, a name too long, a full or read-only
+# disk): the machine's state, which the user can change.
+USER_ERRORS = (ValueError, OSError)
+
+
+class Terminated(KeyboardInterrupt):
+    """A stop asked by a signal other than Ctrl-C (``kill``, a closed
+    terminal): handled like Ctrl-C, so every result folder is cleaned."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _terminate(signum, frame):
+    raise Terminated(signum)
+
+
+def _stop_signals():
+    """Makes SIGTERM and SIGHUP raise :class:`Terminated` (main thread
+    only); returns the handlers to put back."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {signum: signal.signal(signum, _terminate)
+            for signum in (getattr(signal, 'SIGTERM', None),
+                           getattr(signal, 'SIGHUP', None))
+            if signum is not None}
 
 
 def build_parser() -> ArgumentParser:
@@ -56,7 +83,8 @@ def _show_warning(message, category, filename, lineno, file=None,
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Runs one sub-command; returns the exit code (0, 1 on an unexpected
-    failure, 2 on a user mistake, 130 when interrupted)."""
+    failure, 2 on a user mistake, 130 when interrupted, 128 + the signal's
+    number when stopped by SIGTERM or SIGHUP)."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -70,6 +98,15 @@ def main(argv: Optional[List[str]] = None) -> int:
               file=sys.stderr)
         return 2
     prog = f'tg-intrinsic {args.command}'
+    handlers = _stop_signals()
+    try:
+        return _run(args, prog)
+    finally:
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)
+
+
+def _run(args, prog: str) -> int:
     with warnings.catch_warnings():
         if not args.debug:
             warnings.showwarning = _show_warning
@@ -80,16 +117,19 @@ def main(argv: Optional[List[str]] = None) -> int:
         except USER_ERRORS as error:
             if args.debug:
                 raise
-            print(f"{prog}: error: {one_line(error)}", file=sys.stderr)
+            print(f"{prog}: error: {user_message(error)}", file=sys.stderr)
             return 2
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as stop:
             if args.debug:
                 raise
-            print(f"{prog}: interrupted; no file was left half-written "
-                  f"and earlier results are as they were (train --resume "
-                  f"continues from the last checkpoint)",
+            signum = getattr(stop, 'signum', signal.SIGINT)
+            what = 'interrupted' if signum == signal.SIGINT \
+                else f'stopped by {stop}'
+            print(f"{prog}: {what}; no file was left "
+                  f"half-written and earlier results are as they were "
+                  f"(train --resume continues from the last checkpoint)",
                   file=sys.stderr)
-            return 130
+            return 128 + signum
         except Exception as error:  # noqa: BLE001 - reported, not hidden
             if args.debug:
                 raise

@@ -31,6 +31,19 @@ def one_line(message: str) -> str:
     return ' '.join(str(message).split())
 
 
+def user_message(error: BaseException) -> str:
+    """What went wrong, on one line; an operating-system error as the
+    file and the reason, not as ``[Errno N] ...``."""
+    if isinstance(error, OSError) and error.strerror and \
+            str(error).startswith('[Errno'):
+        where = f"'{error.filename}'" if error.filename is not None \
+            else 'a file'
+        if error.filename2 is not None:
+            where += f" -> '{error.filename2}'"
+        return one_line(f"{where}: {error.strerror.lower()}")
+    return one_line(error)
+
+
 def _number(kind, text, minimum, strict):
     try:
         value = kind(text)
@@ -60,6 +73,14 @@ def nonnegative_float(text: str) -> float:
 def positive_int(text: str) -> int:
     """argparse type: an integer >= 1."""
     return _number(int, text, 1, strict=False)
+
+
+def int_at_least(minimum: int):
+    """argparse type: an integer >= ``minimum``."""
+    def parse(text: str) -> int:
+        return _number(int, text, minimum, strict=False)
+    parse.__name__ = f'integer >= {minimum}'
+    return parse
 
 
 def nonnegative_int(text: str) -> int:

@@ -8,8 +8,15 @@ Every command writes its results the same way:
    ``--overwrite``, and even then those files are kept;
 3. a run writes into a temporary folder beside the output folder and puts
    its results in place only when all of them are written: a failed or
-   interrupted run leaves the earlier results as they were.
+   interrupted run leaves the earlier results as they were;
+4. an output folder that is a symbolic link is written through: the
+   results go into its target and the link stays;
+5. one run at a time writes into an output folder: a run holds a lock
+   (:func:`output_lock`) from its checks to its last file, and a second
+   run into the same folder stops at once, naming it, instead of mixing
+   its files with the first one's.
 """
+import hashlib
 import json
 import os
 import shutil
@@ -17,12 +24,105 @@ import tempfile
 from contextlib import contextmanager
 from typing import Iterable, Iterator, List, Optional, Set
 
-from tg_intrinsic.utils import atomic_write_json
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None
+    import msvcrt
+
+from tg_intrinsic.utils import atomic_write_json, current_umask
 
 # The record of the files a run wrote, in every result folder.
 RECORD = '.tg-intrinsic.json'
 _STAGING = '.partial-'
 _PREVIOUS = '.previous-'
+_LOCK = '.lock'
+# Room left in a file name for the hidden siblings' prefix and suffix.
+_SIBLING_ROOM = 40
+
+
+def output_path(path: str) -> str:
+    """The folder results go to: ``path``, or the target of a symbolic
+    link ``path`` (the results go into it and the link stays)."""
+    return os.path.realpath(path) if os.path.islink(path) else path
+
+
+def folder_mode() -> int:
+    """The permissions a new folder gets under the user's umask
+    (``tempfile.mkdtemp`` makes private, 0700, folders)."""
+    return 0o777 & ~current_umask()
+
+
+def _hidden(path: str, kind: str) -> str:
+    """The hidden sibling ``.NAME<kind>`` of ``path`` (staging, lock),
+    with a long NAME shortened (and told apart by a hash) so that the
+    sibling's name still fits the file system."""
+    parent, name = os.path.split(os.path.abspath(path))
+    if len(name.encode()) > 255 - _SIBLING_ROOM:
+        digest = hashlib.sha1(name.encode()).hexdigest()[:12]
+        name = name.encode()[:100].decode(errors='ignore') + '-' + digest
+    return os.path.join(parent, f'.{name}{kind}')
+
+
+def _name_too_long(path: str) -> Optional[str]:
+    """The first part of ``path`` longer than its file system allows."""
+    folder = os.path.abspath(path)
+    while not os.path.exists(folder):
+        folder = os.path.dirname(folder)
+    try:
+        limit = os.pathconf(folder, 'PC_NAME_MAX')
+    except (OSError, ValueError, AttributeError):
+        limit = 255
+    for part in os.path.abspath(path).split(os.sep):
+        if len(part.encode()) > limit:
+            return f"its name '{part[:40]}...' has {len(part.encode())} " \
+                f"bytes, more than the file system allows ({limit})"
+    return None
+
+
+@contextmanager
+def output_lock(path: str, option: str = '--out') -> Iterator[None]:
+    """Holds the lock of the output ``path`` (a folder or a file) while
+    the block runs, so that no other run writes there at the same time;
+    raises a :class:`ValueError` naming ``option`` when another process
+    holds it. The lock is the file ``.NAME.lock`` beside ``path``,
+    removed when the block ends; the operating system releases it when
+    its process dies, so a killed run never blocks the next one."""
+    lock_path = _hidden(os.path.realpath(path), _LOCK)
+    os.makedirs(os.path.dirname(lock_path), exist_ok=True)
+    while True:
+        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, folder_mode() & 0o666)
+        if not _try_lock(fd):
+            os.close(fd)
+            raise ValueError(
+                f"{option} '{path}' is being written by another run of "
+                f"tg-intrinsic right now; wait for it to finish, or give "
+                f"another {option}")
+        try:  # the holder before may have removed the file meanwhile
+            if os.path.samestat(os.fstat(fd), os.stat(lock_path)):
+                break
+        except FileNotFoundError:
+            pass
+        os.close(fd)
+    try:
+        yield
+    finally:
+        try:
+            os.remove(lock_path)   # before the lock ends (see the loop)
+        except FileNotFoundError:
+            pass
+        os.close(fd)
+
+
+def _try_lock(fd: int) -> bool:
+    try:
+        if fcntl is not None:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        else:  # pragma: no cover - Windows
+            msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)
+        return True
+    except OSError:
+        return False
 
 
 def check_output_path(path: str, inputs: Iterable[str] = (),
@@ -34,6 +134,10 @@ def check_output_path(path: str, inputs: Iterable[str] = (),
     which writing the results there would replace or delete."""
     if not str(path).strip():
         raise ValueError(f"{option} is empty; give a folder")
+    too_long = _name_too_long(path)
+    if too_long:
+        raise ValueError(f"{option} '{path[:60]}...' cannot be created: "
+                         f"{too_long}; give a shorter name")
     if os.path.exists(path) and not os.path.isdir(path):
         raise ValueError(f"{option} '{path}' is a file; give a folder")
     parent = os.path.dirname(os.path.abspath(path))
@@ -101,11 +205,9 @@ def claim_folder(path: str, command: str, overwrite: bool = False,
     """Checks that ``command`` may write its results into ``path`` (see
     the module docstring) and returns the foreign files it holds (empty
     unless ``overwrite``). Raises a :class:`ValueError` naming
-    ``option`` otherwise; puts back a folder that a run killed while
-    replacing it left aside."""
+    ``option`` otherwise."""
     check_output_path(path, inputs, option)
-    _restore_previous(path)
-    foreign = foreign_files(path, command)
+    foreign = foreign_files(output_path(path), command)
     if foreign and not overwrite:
         shown = ', '.join(foreign[:5]) + (f' and {len(foreign) - 5} more'
                                           if len(foreign) > 5 else '')
@@ -124,8 +226,7 @@ def write_record(path: str, command: str, files: Iterable[str]) -> None:
 
 
 def _siblings(path: str, kind: str) -> List[str]:
-    parent, name = os.path.split(os.path.abspath(path))
-    prefix = f'.{name}{kind}'
+    parent, prefix = os.path.split(_hidden(path, kind))
     try:
         return sorted(os.path.join(parent, entry)
                       for entry in os.listdir(parent)
@@ -134,9 +235,10 @@ def _siblings(path: str, kind: str) -> List[str]:
         return []
 
 
-def _restore_previous(path: str) -> None:
+def restore_previous(path: str) -> None:
     """A run killed between moving the old results aside and moving the
-    new ones in leaves no ``path`` but ``.NAME.previous-*``: put it back."""
+    new ones in leaves no ``path`` but ``.NAME.previous-*``: put it back
+    (only while holding :func:`output_lock`)."""
     previous = _siblings(path, _PREVIOUS)
     if previous and not os.path.exists(path):
         os.rename(previous[-1], path)
@@ -163,8 +265,8 @@ def commit_folder(staging: str, path: str, command: str) -> None:
     # (a folder holding the working directory stays: renaming it away
     # would leave the user's shell in a deleted folder)
     if not foreign_files(path, command) and not holds_cwd:
-        parent, name = os.path.split(os.path.abspath(path))
-        aside = tempfile.mkdtemp(prefix=f'.{name}{_PREVIOUS}', dir=parent)
+        parent, prefix = os.path.split(_hidden(path, _PREVIOUS))
+        aside = tempfile.mkdtemp(prefix=prefix, dir=parent)
         os.rmdir(aside)
         os.rename(path, aside)
         os.rename(staging, path)
@@ -192,12 +294,16 @@ def commit_folder(staging: str, path: str, command: str) -> None:
 
 def new_staging_folder(path: str) -> str:
     """An empty temporary folder beside ``path`` (same file system, so
-    :func:`commit_folder` only renames); removes those of killed runs."""
-    parent, name = os.path.split(os.path.abspath(path))
+    :func:`commit_folder` only renames), with the permissions of a new
+    folder; removes those of killed runs (only while holding
+    :func:`output_lock`)."""
+    parent, prefix = os.path.split(_hidden(path, _STAGING))
     os.makedirs(parent, exist_ok=True)
     for leftover in _siblings(path, _STAGING):
         shutil.rmtree(leftover, ignore_errors=True)
-    return tempfile.mkdtemp(prefix=f'.{name}{_STAGING}', dir=parent)
+    staging = tempfile.mkdtemp(prefix=prefix, dir=parent)
+    os.chmod(staging, folder_mode())
+    return staging
 
 
 @contextmanager
@@ -207,7 +313,9 @@ def result_folder(path: str, command: str, overwrite: bool = False,
     """Yields a temporary folder to write all results of ``command`` into;
     when the block ends without an error they replace those in ``path``
     (:func:`commit_folder`), else they are deleted and ``path`` is left as
-    it was. Checks ``path`` first (:func:`claim_folder`).
+    it was. Checks ``path`` first (:func:`claim_folder`) and holds its
+    lock (:func:`output_lock`) until the end; a link ``path`` is written
+    through (:func:`output_path`).
 
     Example::
 
@@ -215,11 +323,15 @@ def result_folder(path: str, command: str, overwrite: bool = False,
                            inputs=[args.mesh]) as out:
             write_ply(os.path.join(out, 'result.ply'), ...)
     """
-    claim_folder(path, command, overwrite, inputs, option)
-    staging = new_staging_folder(path)
-    try:
-        yield staging
-        commit_folder(staging, path, command)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
+    check_output_path(path, inputs, option)
+    path = output_path(path)
+    with output_lock(path, option):
+        restore_previous(path)
+        claim_folder(path, command, overwrite, inputs, option)
+        staging = new_staging_folder(path)
+        try:
+            yield staging
+            commit_folder(staging, path, command)
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise

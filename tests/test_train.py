@@ -223,13 +223,22 @@ def test_training_on_a_mesh_folder(tmp_path):
             folder.mkdir(parents=True)
             for i in range(3):
                 make(1.0 + 0.1 * i).export(folder / f'{name}_{i}.off')
-    metrics = main(['--dataset', 'mesh_folder', '--mesh-root',
-                    str(tmp_path / 'meshes'), '--out', str(tmp_path / 'run'),
-                    '--num-points', '96', '--batch-size', '4',
-                    '--conv-channels', '8', '8', '--k', '8', '--epochs', '1',
-                    '--quiet'])
+    data_set = sorted(str(p) for p in (tmp_path / 'meshes').rglob('*'))
+    argv = ['--dataset', 'mesh_folder', '--mesh-root',
+            str(tmp_path / 'meshes'), '--out', str(tmp_path / 'run'),
+            '--root', str(tmp_path / 'cache'), '--num-points', '96',
+            '--batch-size', '4', '--conv-channels', '8', '8', '--k', '8',
+            '--epochs', '1', '--quiet']
+    metrics = main(argv)
     assert metrics['dataset'] == 'mesh_folder'
     assert len(metrics['history']) == 1
+    # every cache under --root: a read-only data set works
+    assert sorted(str(p) for p in (tmp_path / 'meshes').rglob('*')) == \
+        data_set
+    assert list((tmp_path / 'cache' / 'folder_cache').iterdir())
+    with pytest.raises(UsageError, match=r"--num-points 6 is fewer than "
+                       r"--k 8, the neighbours every point's operators fit"):
+        main(argv[:-1] + ['--num-points', '6', '--overwrite'])
 
 
 def test_rotation_augmentation_and_sgd(tmp_path):
@@ -506,3 +515,15 @@ def test_compiled_and_mixed_precision_training(tmp_path, modelnet_root):
     with pytest.raises(UsageError, match='precision'):
         run(tmp_path, *common, '--resume', root=modelnet_root,
             out=tmp_path / 'bf16')
+
+
+def test_a_second_run_into_the_same_out_stops_at_once(tmp_path):
+    from tg_intrinsic.io.results import output_lock
+    out = tmp_path / 'run'
+    with output_lock(str(out)):   # another run holds it
+        with pytest.raises(ValueError, match=r"--out '.*run' is being "
+                           r"written by another run of tg-intrinsic"):
+            run(tmp_path, '--epochs', '1')
+    assert not out.exists()
+    run(tmp_path, '--epochs', '1')   # free again
+    assert (out / 'checkpoint.pt').exists()

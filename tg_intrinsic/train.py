@@ -99,6 +99,7 @@ import math
 import os
 import random
 import time
+from contextlib import ExitStack
 from typing import Callable, Dict, List, Optional
 
 import numpy as np
@@ -115,7 +116,8 @@ from tg_intrinsic.devices import (PRECISIONS, autocast, check_device,
 from tg_intrinsic.cli.common import UsageError, one_line
 from tg_intrinsic.io.figures import save_figure
 from tg_intrinsic.io.results import (RECORD, check_output_path, claim_folder,
-                                     recorded_files, write_record)
+                                     output_lock, recorded_files,
+                                     write_record)
 from tg_intrinsic.nn.harmonic_resnet_block import (COMPLEX_NORMS,
                                                    DEFAULT_COMPLEX_NORM)
 from tg_intrinsic.nn.recalibrate_batch_norm import (batch_norms,
@@ -209,8 +211,10 @@ def source_splits(args):
                 for split in ('train', 'test')]
     if args.mesh_root is None:
         raise ValueError("--dataset mesh_folder needs --mesh-root PATH")
+    # its processed files under --root: the data set may be read-only
     sets = [open_folder(args.mesh_root, split, task=args.task,
-                        force_reload=args.force_reload, log=not args.quiet)
+                        force_reload=args.force_reload, log=not args.quiet,
+                        cache_root=args.root)
             for split in ('train', 'test')]
     count = sets[0].num_classes
     if args.task == 'classification' and count < 2:
@@ -451,6 +455,11 @@ def build_point_sets(args, num_classes: Optional[int] = None):
     processes; stored on disk with ``args.on_disk``). With
     :obj:`num_classes` (a checkpoint's), data of another number of classes
     are refused before they are prepared."""
+    if args.num_points < args.k:
+        raise UsageError(f"--num-points {args.num_points} is fewer than --k "
+                         f"{args.k}, the neighbours every point's operators "
+                         f"fit; give --num-points {args.k} or more, or a "
+                         f"smaller --k")
     sets = source_splits(args)
     _check_num_classes(sets[0], num_classes)
     prepare = _PreparePoints(args.num_points, args.k, args.regularizer,
@@ -954,11 +963,18 @@ def train(args) -> Dict:
             check_precision(args.precision, device)
         except ValueError as error:
             raise UsageError(str(error)) from None
-        # before the data are prepared (minutes): rank 0 checks --out and
-        # reads the checkpoint, which every process then gets (no shared
-        # file system needed)
-        state = _from_rank_zero(lambda: claim_output(args))
-        return _train(args, device, state)
+        with ExitStack() as held:
+            def claim():
+                # rank 0 writes --out, so it alone holds its lock, for the
+                # whole run: a second run into it stops at once
+                check_output_path(args.out)
+                held.enter_context(output_lock(args.out, '--out'))
+                return claim_output(args)
+            # before the data are prepared (minutes): rank 0 checks --out
+            # and reads the checkpoint, which every process then gets (no
+            # shared file system needed)
+            state = _from_rank_zero(claim)
+            return _train(args, device, state)
     finally:
         if started:
             distributed.stop()

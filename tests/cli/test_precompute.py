@@ -3,8 +3,10 @@ directly, folders mirrored, resuming, the settings manifest, failures that
 leave the other files done, and --workers 1 vs 2 giving the same files."""
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -250,7 +252,7 @@ def test_bad_input_is_one_line_and_exit_code_2(tmp_path, capsys, case,
 def test_bad_options(tmp_path, capsys):
     src = make_folder(tmp_path / 'in')
     for argv, message in (
-            (['mls', '--k', '0'], 'argument --k: must be at least 1'),
+            (['mls', '--k', '0'], 'argument --k: must be at least 3'),
             (['logmap', '--radius', '-1'], 'must be greater than 0'),
             (['gravo', '--ratio', '0.5'], '--ratio must be greater than 1'),
             (['hsn', '--method', 'exact'], 'invalid choice')):
@@ -348,3 +350,88 @@ def test_an_stl_is_welded_for_every_kind(tmp_path, capsys):
         assert code == 0, stderr
         assert 'welded 198 vertices' in stderr
         assert load(out).num_nodes == 42
+
+
+def test_overwrite_keeps_the_users_files_beside_the_results(tmp_path,
+                                                             capsys):
+    src = make_folder(tmp_path / 'in')
+    out = tmp_path / 'out'
+    argv = ['--quiet', 'precompute', 'mls', str(src), str(out)]
+    assert cli(argv + ['--k', '3'], capsys)[0] == 0
+    torch.save({'mine': 1}, out / 'labels.pt')
+    (out / 'mine').mkdir()
+    torch.save({'mine': 2}, out / 'mine' / 'notes.pt')
+    code, _, stderr = cli(argv + ['--k', '8'], capsys)
+    assert code == 2 and 'k 3 -> 8' in stderr
+    # they are the user's, not results of unknown settings
+    code, _, stderr = cli(argv + ['--k', '3'], capsys)
+    assert code == 2 and 'files precompute did not write (labels.pt, ' \
+        'mine/notes.pt)' in stderr, stderr
+    (src / 'c.ply').unlink()   # its old result is precompute's: removed
+    code, _, stderr = cli(argv + ['--k', '8', '--overwrite'], capsys)
+    assert code == 0, stderr
+    assert load(out / 'labels.pt') == {'mine': 1}
+    assert load(out / 'mine' / 'notes.pt') == {'mine': 2}
+    assert not (out / 'c.pt').exists()
+    assert load(out / 'a.pt').edge_index.size(1) == 42 * 8
+    with open(out / 'precompute.json') as f:
+        assert json.load(f)['files'] == ['a.pt', 'sub/b.pt']
+
+
+def test_a_linked_output_is_written_through(tmp_path, capsys):
+    src = make_folder(tmp_path / 'in')
+    target = tmp_path / 'scratch'
+    target.mkdir()
+    link = tmp_path / 'out'
+    link.symlink_to(target)
+    argv = ['--quiet', 'precompute', 'gravo', str(src), str(link),
+            '--lower-bound', '10']
+    assert cli(argv, capsys)[0] == 0
+    assert cli(argv + ['--ratio', '3', '--overwrite'], capsys)[0] == 0
+    assert link.is_symlink() and (target / 'sub' / 'b.pt').exists()
+    assert sorted(os.listdir(tmp_path)) == ['in', 'out', 'scratch']
+
+
+def test_messages_name_the_option_and_the_problem(tmp_path, capsys):
+    src = make_folder(tmp_path / 'in')
+    (tmp_path / 'x.pt').mkdir()
+    for argv, needles in [
+            (['mls', src / 'a.obj', tmp_path / 'x.pt'],
+             ["OUTPUT '", "x.pt' is a folder, not a .pt file"]),
+            (['mls', src / 'a.obj', tmp_path / 'x.pt', '--overwrite'],
+             ["x.pt' is a folder, not a .pt file"]),
+            (['mls', src, tmp_path / 'o', '--normal-k', '1'],
+             ['argument --normal-k: must be at least 2']),
+            (['mls', src, tmp_path / 'o', '--k', '2'],
+             ['argument --k: must be at least 3'])]:
+        code, _, stderr = cli(['--quiet', 'precompute'] + argv, capsys)
+        assert code == 2 and 'Traceback' not in stderr, stderr
+        assert len(stderr.strip().splitlines()) == 1, stderr
+        for needle in needles:
+            assert needle in stderr, stderr
+
+
+def test_ctrl_c_stops_precompute_while_it_saves(tmp_path):
+    """Ctrl-C (SIGINT) in the middle of an --overwrite run: exit 130 and
+    a stop, not a failed file reported as torch's RuntimeError and a run
+    that goes on; the earlier results stay."""
+    src = tmp_path / 'in'
+    src.mkdir()
+    for index in range(30):
+        trimesh.creation.icosphere(2).export(str(src / f'{index:02d}.obj'))
+    out = tmp_path / 'out'
+    argv = [sys.executable, '-m', 'tg_intrinsic', '--quiet', 'precompute',
+            'gravo', str(src), str(out), '--lower-bound', '10']
+    subprocess.run(argv, check=True, capture_output=True)
+    before = (out / '00.pt').read_bytes()
+    run = subprocess.Popen(argv + ['--ratio', '3', '--overwrite'],
+                           stderr=subprocess.PIPE, text=True)
+    staging = tmp_path / '.out.overwrite'
+    while run.poll() is None and len(list(staging.glob('*.pt'))) < 3:
+        time.sleep(0.01)
+    run.send_signal(signal.SIGINT)
+    _, stderr = run.communicate(timeout=120)
+    assert run.returncode == 130, stderr
+    assert 'interrupted' in stderr and 'failed' not in stderr, stderr
+    assert (out / '00.pt').read_bytes() == before
+    assert not list(staging.glob('.tmp-*'))   # no half-written file

@@ -21,6 +21,7 @@ import traceback
 from typing import Dict, List, Optional, Tuple
 
 from .common import (ArgumentParser, UsageError, common_options, default_of,
+                     int_at_least,
                      nonnegative_float, nonnegative_int, one_line,
                      positive_float, positive_int)
 
@@ -69,6 +70,7 @@ KINDS = {
 
 def add_arguments(parser):
     from tg_intrinsic.geometry.geodesics.logmap import METHODS
+    from tg_intrinsic.geometry.pointcloud.mls import MIN_MLS_NEIGHBOURS
     from tg_intrinsic.train import hsn_pipeline
     from tg_intrinsic.transforms import (EstimateNormals, GravoHierarchy,
                                          MLSOperators)
@@ -98,7 +100,7 @@ def add_arguments(parser):
                          'the computation (default: %(default)s, what the '
                          'models train in)')
         if kind == 'mls':
-            sub.add_argument('--k', type=positive_int,
+            sub.add_argument('--k', type=int_at_least(MIN_MLS_NEIGHBOURS),
                              default=default_of(MLSOperators, 'k'),
                              help='neighbours of every point, itself '
                              'included (default: %(default)s)')
@@ -106,7 +108,7 @@ def add_arguments(parser):
                              default=default_of(MLSOperators, 'regularizer'),
                              help='Tikhonov weight of the least-squares '
                              'fits (default: %(default)s)')
-            sub.add_argument('--normal-k', type=positive_int,
+            sub.add_argument('--normal-k', type=int_at_least(2),
                              default=default_of(EstimateNormals, 'k'),
                              help='neighbours for estimated normals '
                              '(default: %(default)s)')
@@ -297,6 +299,11 @@ def plan(input_path: str, output: str) -> Tuple[List[Tuple[str, str]],
             (os.path.isfile(input_path) and output.lower().endswith('.pt')):
         raise UsageError(f"OUTPUT '{output}' is a file; give a folder (or, "
                          f"for one INPUT file, a .pt file)")
+    if os.path.isdir(output) and output.lower().endswith('.pt') and \
+            os.path.isfile(input_path):
+        raise UsageError(f"OUTPUT '{output}' is a folder, not a .pt file; "
+                         f"give a .pt file name that is free, or a folder "
+                         f"name without .pt to write into")
     if os.path.isfile(input_path):
         if os.path.splitext(input_path)[1].lower() not in MESH_EXTENSIONS:
             raise UsageError(f"INPUT '{input_path}' is not a mesh or point "
@@ -349,13 +356,24 @@ def _changes(old: Dict, manifest: Dict) -> List[str]:
                       if old['settings'].get(key) != value]
 
 
-def _foreign_files(output: str, owned_results: bool) -> List[str]:
+def _own_results(manifest: Optional[Dict]) -> Optional[set]:
+    """The results (relative paths) a manifest says precompute wrote;
+    :obj:`None` for no manifest, or one of a version that kept no list
+    (then every .pt file counts as precompute's)."""
+    if manifest is None or not isinstance(manifest.get('files'), list):
+        return None
+    return {str(name) for name in manifest['files']}
+
+
+def _foreign_files(output: str, manifest: Optional[Dict]) -> List[str]:
     """Files under ``output`` that precompute did not write: all but its
-    manifest, failure list and (when a manifest owns them) .pt files."""
+    manifest, failure list and the results its manifest lists."""
     from tg_intrinsic.io.results import RECORD, files_under
+    own = _own_results(manifest)
     return [name for name in files_under(output)
             if name not in (MANIFEST, FAILURES, RECORD) and not (
-                owned_results and name.endswith('.pt'))]
+                name in own if own is not None else
+                manifest is not None and name.endswith('.pt'))]
 
 
 def choose_folder(output: str, manifest: Dict, overwrite: bool,
@@ -376,9 +394,14 @@ def choose_folder(output: str, manifest: Dict, overwrite: bool,
                          f"with --overwrite to recompute every file, or "
                          f"give another OUTPUT")
     owned = os.path.exists(os.path.join(output, MANIFEST))
-    foreign = _foreign_files(output, owned)
+    foreign = _foreign_files(output, old if old is not None or not owned
+                             else _read_manifest(os.path.join(output,
+                                                              MANIFEST)))
     if foreign and not overwrite:
-        unknown = [name for name in foreign if name.endswith('.pt')]
+        # .pt files beside a manifest that does not list them are the
+        # user's; without a manifest they may be results of unknown settings
+        unknown = [] if owned else [name for name in foreign
+                                    if name.endswith('.pt')]
         if unknown:
             raise UsageError(f"'{output}' holds results ({unknown[0]}, ...) "
                              f"but no {MANIFEST}, so their settings are "
@@ -396,8 +419,15 @@ def choose_folder(output: str, manifest: Dict, overwrite: bool,
             if os.path.isdir(folder) else None
         if kept is None or _changes(kept, manifest):
             shutil.rmtree(folder, ignore_errors=True)  # other settings
+    # the results this folder will hold, so that a later --overwrite
+    # removes precompute's own stale files and nothing else
+    files = {os.path.relpath(target, output) for target in targets}
+    if folder == output and old is not None:  # resumed: earlier ones stay
+        files |= {name for name in _own_results(old) or ()
+                  if os.path.isfile(os.path.join(output, name))}
     os.makedirs(folder, exist_ok=True)
-    atomic_write_json(os.path.join(folder, MANIFEST), manifest)
+    atomic_write_json(os.path.join(folder, MANIFEST),
+                      {**manifest, 'files': sorted(files)})
     return folder
 
 
@@ -411,18 +441,19 @@ def commit_staging(staging: str, output: str, targets: List[str]):
     """Replaces the earlier results in ``output`` by those in
     ``staging``: the old manifest goes first (so no moment claims
     settings the files do not hold), then every result, then the new
-    manifest; earlier results of files no longer in INPUT are removed."""
+    manifest; earlier results of files no longer in INPUT are removed
+    (only those the old manifest lists: every other file is the user's)."""
     old_manifest = os.path.join(output, MANIFEST)
-    owned = os.path.exists(old_manifest)
-    if owned:
+    earlier = _own_results(_read_manifest(old_manifest)) or set() \
+        if os.path.exists(old_manifest) else set()
+    if os.path.exists(old_manifest):
         os.remove(old_manifest)
-    keep = {os.path.abspath(t) for t in targets}
-    if owned:
-        for root, _, files in os.walk(output):
-            for name in files:
-                path = os.path.abspath(os.path.join(root, name))
-                if name.endswith('.pt') and path not in keep:
-                    os.remove(path)
+    keep = {os.path.relpath(t, output) for t in targets}
+    for name in sorted(earlier - keep):
+        try:
+            os.remove(os.path.join(output, name))
+        except FileNotFoundError:
+            pass
     for target in targets:
         rel = os.path.relpath(target, output)
         os.makedirs(os.path.dirname(os.path.abspath(target)), exist_ok=True)
@@ -468,13 +499,20 @@ def run_tasks(tasks, workers: int, quiet: bool, debug: bool, desc: str):
 
 
 def run(args):
-    import tg_intrinsic
-    from tg_intrinsic.utils import atomic_write_json
+    from tg_intrinsic.io.results import output_lock, output_path
     start = time.perf_counter()
     if args.kind == 'gravo' and args.ratio <= 1:
         raise UsageError(f"--ratio must be greater than 1 (each level keeps "
                          f"about 1/RATIO of the points), got {args.ratio:g}")
+    args.output = output_path(args.output)  # a link: written through
     pairs, folder = plan(args.input, args.output)
+    with output_lock(args.output, 'OUTPUT'):
+        return _precompute(args, pairs, folder, start)
+
+
+def _precompute(args, pairs, folder: bool, start: float) -> int:
+    import tg_intrinsic
+    from tg_intrinsic.utils import atomic_write_json
     settings = settings_of(args)
     write_to = args.output
     if folder:

@@ -208,6 +208,18 @@ def processed_folder(root, pre_transform, pre_filter) -> str:
                                                         pre_filter))
 
 
+def cache_base(root: str, cache_root: Optional[str]) -> str:
+    """Where a folder data set keeps its processed files: inside ``root``,
+    or, with ``cache_root`` (a read-only data set, a shared one), in a
+    folder of its own under ``cache_root`` named after ``root``'s path."""
+    if cache_root is None:
+        return root
+    real = osp.realpath(root)
+    return osp.join(osp.expanduser(os.fspath(cache_root)), 'folder_cache',
+                    osp.basename(real) + '-' +
+                    hashlib.sha1(real.encode()).hexdigest()[:10])
+
+
 def list_files(folder: str, extensions: Sequence[str]) -> List[str]:
     """Sorted paths of the files in ``folder`` whose (lower-case)
     extension is in ``extensions``; ``[]`` if there is no such folder."""
@@ -265,7 +277,8 @@ class FolderDataset(InMemoryDataset):
     lists. The files are read again when that manifest differs from the
     folder's (a file added, removed or changed) or with
     ``force_reload=True``. Every file is written atomically, the manifest
-    last.
+    last. With ``cache_root`` (a read-only data set) the processed folder
+    lies under ``cache_root`` instead (:func:`cache_base`).
 
     Subclasses set ``LAYOUT`` (the folder layout, for error messages) and
     ``SPLITS``, and define ``cache_name`` (a file name for the split and
@@ -276,7 +289,8 @@ class FolderDataset(InMemoryDataset):
     SPLITS = ('train', 'test')
 
     def __init__(self, root, split, transform, pre_transform, pre_filter,
-                 log, force_reload, workers: int = 1):
+                 log, force_reload, workers: int = 1,
+                 cache_root: Optional[str] = None):
         self.split = check_split(split, self.SPLITS)
         self.workers = check_workers(workers)
         root = osp.expanduser(os.fspath(root))
@@ -284,8 +298,10 @@ class FolderDataset(InMemoryDataset):
             raise ValueError(f"{type(self).__name__}: '{root}' is not a "
                              f"folder; expected the layout {self.LAYOUT}")
         self.root = root
+        self.cache_base = cache_base(root, cache_root)
         self.manifest = file_manifest(root, self.scan())
-        path = osp.join(processed_folder(root, pre_transform, pre_filter),
+        path = osp.join(processed_folder(self.cache_base, pre_transform,
+                                         pre_filter),
                         self.cache_name + '_manifest.json')
         stored = None
         if osp.isfile(path):
@@ -307,7 +323,7 @@ class FolderDataset(InMemoryDataset):
 
     @property
     def processed_dir(self) -> str:
-        return processed_folder(self.root, self.pre_transform,
+        return processed_folder(self.cache_base, self.pre_transform,
                                 self.pre_filter)
 
     @property

@@ -1,6 +1,7 @@
 """Opens a local data folder in whichever standard layout it has."""
 import os
 import os.path as osp
+from typing import Optional
 
 from .mesh_folder import MeshFolder
 from .modelnet_resampled import ModelNetResampled
@@ -44,7 +45,8 @@ def _has_point_files(root: str) -> bool:
 
 def open_folder(root: str, split: str, task: str = 'classification',
                 force_reload: bool = False, num_points: int = 10000,
-                variant: str = 'PB_T50_RS', log: bool = True):
+                variant: str = 'PB_T50_RS', log: bool = True,
+                cache_root: Optional[str] = None):
     r"""The :obj:`split` of the data set in the local folder :obj:`root`,
     read by the reader of its layout, recognised by its files:
 
@@ -59,7 +61,9 @@ def open_folder(root: str, split: str, task: str = 'classification',
       otherwise :class:`MeshFolder` (a :obj:`.txt` or :obj:`.npy` file
       named like a mesh beside it holds that mesh's labels).
 
-    :obj:`log` is the reader's: whether it prints progress.
+    :obj:`log` is the reader's: whether it prints progress;
+    :obj:`cache_root` too: where the processed files go instead of inside
+    :obj:`root` (a read-only data set).
 
     Raises:
         ValueError: if :obj:`root` is not a folder, or from the reader,
@@ -74,14 +78,16 @@ def open_folder(root: str, split: str, task: str = 'classification',
         num_classes = 40 if 'modelnet40_shape_names.txt' in names else 10
         return ModelNetResampled(root, split, num_classes=num_classes,
                                  num_points=num_points,
-                                 force_reload=force_reload, log=log)
+                                 force_reload=force_reload, log=log,
+                                 cache_root=cache_root)
     if 'synsetoffset2category.txt' in names:
         return ShapeNetPartNormal(root, 'trainval' if split == 'train'
                                   else split, force_reload=force_reload,
-                                  log=log)
+                                  log=log, cache_root=cache_root)
     if names & {'h5_files', 'main_split', 'main_split_nobg'}:
         return ScanObjectNN(root, split, variant=variant,
-                            force_reload=force_reload, log=log)
+                            force_reload=force_reload, log=log,
+                            cache_root=cache_root)
     reader = PointCloudFolder if _has_point_files(root) else MeshFolder
     return reader(root, split, task=task, force_reload=force_reload,
-                  log=log)
+                  log=log, cache_root=cache_root)

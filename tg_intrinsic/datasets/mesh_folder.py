@@ -148,6 +148,9 @@ class MeshFolder(FolderDataset):
         workers (int, optional): Processes that apply the pre-filter and
             the pre-transform, one thread each; the result does not depend
             on it. (default: :obj:`1`)
+        cache_root (str, optional): Keep the processed files under this
+            folder instead of inside :obj:`root` (a read-only data set).
+            (default: :obj:`None`)
 
     Raises:
         ValueError: if :obj:`root` is not a folder or does not follow the
@@ -179,6 +182,7 @@ class MeshFolder(FolderDataset):
         log: bool = True,
         force_reload: bool = False,
         workers: int = 1,
+        cache_root: Optional[str] = None,
     ):
         self.task = check_task(task, label_kind=(label_kind, 'auto'),
                                label_offset=(label_offset, None),
@@ -190,7 +194,7 @@ class MeshFolder(FolderDataset):
         self.num_classes_arg = None if num_classes is None else \
             check_positive_int(num_classes, 'num_classes', 1)
         super().__init__(root, split, transform, pre_transform, pre_filter,
-                         log, force_reload, workers)
+                         log, force_reload, workers, cache_root)
         self.classes: Optional[List[str]] = self.meta['classes']
 
     @property

@@ -1,6 +1,6 @@
 """Reads PointNet++'s resampled ModelNet point clouds from a local folder."""
 import os.path as osp
-from typing import List
+from typing import List, Optional
 
 import torch
 
@@ -69,6 +69,9 @@ class ModelNetResampled(FolderDataset):
         workers (int, optional): Processes that apply the pre-filter and
             the pre-transform, one thread each; the result does not depend
             on it. (default: :obj:`1`)
+        cache_root (str, optional): Keep the processed files under this
+            folder instead of inside :obj:`root` (a read-only data set).
+            (default: :obj:`None`)
 
     Raises:
         ValueError: naming the file: a missing list or shape file, a shape
@@ -85,12 +88,13 @@ class ModelNetResampled(FolderDataset):
     def __init__(self, root: str, split: str = 'train', num_classes: int = 40,
                  num_points: int = 1024, transform=None, pre_transform=None,
                  pre_filter=None, log: bool = True,
-                 force_reload: bool = False, workers: int = 1):
+                 force_reload: bool = False, workers: int = 1,
+                 cache_root: Optional[str] = None):
         self.num_classes_arg = check_option(num_classes, 'num_classes',
                                             (40, 10))
         self.num_points = check_positive_int(num_points, 'num_points', 1)
         super().__init__(root, split, transform, pre_transform, pre_filter,
-                         log, force_reload, workers)
+                         log, force_reload, workers, cache_root)
         self.classes: List[str] = self.meta['classes']
 
     @property

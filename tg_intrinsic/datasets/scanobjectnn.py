@@ -1,6 +1,6 @@
 """Reads ScanObjectNN's HDF5 files from a local folder."""
 import os.path as osp
-from typing import List
+from typing import List, Optional
 
 import torch
 
@@ -69,6 +69,9 @@ class ScanObjectNN(FolderDataset):
         workers (int, optional): Processes that apply the pre-filter and
             the pre-transform, one thread each; the result does not depend
             on it. (default: :obj:`1`)
+        cache_root (str, optional): Keep the processed files under this
+            folder instead of inside :obj:`root` (a read-only data set).
+            (default: :obj:`None`)
 
     Raises:
         ImportError: without h5py.
@@ -87,10 +90,11 @@ class ScanObjectNN(FolderDataset):
     def __init__(self, root: str, split: str = 'train',
                  variant: str = 'PB_T50_RS', transform=None,
                  pre_transform=None, pre_filter=None, log: bool = True,
-                 force_reload: bool = False, workers: int = 1):
+                 force_reload: bool = False, workers: int = 1,
+                 cache_root: Optional[str] = None):
         self.variant = check_option(variant, 'variant', VARIANTS)
         super().__init__(root, split, transform, pre_transform, pre_filter,
-                         log, force_reload, workers)
+                         log, force_reload, workers, cache_root)
 
     @property
     def cache_name(self) -> str:

@@ -79,6 +79,9 @@ class ShapeNetPartNormal(FolderDataset):
         workers (int, optional): Processes that apply the pre-filter and
             the pre-transform, one thread each; the result does not depend
             on it. (default: :obj:`1`)
+        cache_root (str, optional): Keep the processed files under this
+            folder instead of inside :obj:`root` (a read-only data set).
+            (default: :obj:`None`)
 
     Raises:
         ValueError: on an unknown category, or naming the file: a missing
@@ -98,7 +101,8 @@ class ShapeNetPartNormal(FolderDataset):
                  categories: Optional[Union[str, Sequence[str]]] = None,
                  transform=None, pre_transform=None, pre_filter=None,
                  log: bool = True, force_reload: bool = False,
-                 workers: int = 1):
+                 workers: int = 1,
+                 cache_root: Optional[str] = None):
         if isinstance(categories, str):
             categories = [categories]
         if categories is not None:
@@ -110,7 +114,7 @@ class ShapeNetPartNormal(FolderDataset):
             categories = sorted(set(categories), key=list(PART_COUNTS).index)
         self.selected = categories
         super().__init__(root, split, transform, pre_transform, pre_filter,
-                         log, force_reload, workers)
+                         log, force_reload, workers, cache_root)
         self.categories: List[str] = self.meta['categories']
         self.category_parts = {c: CATEGORY_PARTS[c] for c in self.categories}
         self.part_mask = torch.zeros(len(self.categories), NUM_PARTS,

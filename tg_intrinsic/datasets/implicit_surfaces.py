@@ -16,8 +16,9 @@ Private helpers of :class:`~tg_intrinsic.datasets.SyntheticSHREC`:
   shared tetrahedron face identical, so this still holds); triangles are
   oriented so that their normals point to the outside (positive field).
 """
-import numba
 import numpy as np
+
+from tg_intrinsic.geometry.jit import jit
 
 CONE = 0
 ELLIPSOID = 1
@@ -51,7 +52,7 @@ def ellipsoid(center, radii, rot, label, blend):
     return row
 
 
-@numba.njit(cache=True, fastmath=False)
+@jit(fastmath=False)
 def _prim_sd(x, y, z, P, i):
     o = NUM_HEAD
     if P[i, 0] == CONE:
@@ -93,7 +94,7 @@ def _prim_sd(x, y, z, P, i):
         return k0 * (k0 - 1.0) / k1
 
 
-@numba.njit(cache=True)
+@jit
 def _field(x, y, z, P):
     acc = 1e30
     for i in range(P.shape[0]):
@@ -117,7 +118,7 @@ def _field(x, y, z, P):
     return acc
 
 
-@numba.njit(cache=True)
+@jit
 def eval_grid(P, origin, h, nx, ny, nz):
     """Field values on the grid ``origin + h * (i, j, k)``."""
     out = np.empty((nx, ny, nz))
@@ -130,7 +131,7 @@ def eval_grid(P, origin, h, nx, ny, nz):
     return out
 
 
-@numba.njit(cache=True)
+@jit
 def eval_grid_banded(P, origin, h, nx, ny, nz, step=4, safety=2.0):
     """Like :func:`eval_grid`, but exact only in a band around the surface.
 
@@ -185,7 +186,7 @@ def eval_grid_banded(P, origin, h, nx, ny, nz, step=4, safety=2.0):
     return out
 
 
-@numba.njit(cache=True)
+@jit
 def eval_points(P, pts):
     out = np.empty(pts.shape[0])
     for n in range(pts.shape[0]):
@@ -193,7 +194,7 @@ def eval_points(P, pts):
     return out
 
 
-@numba.njit(cache=True)
+@jit
 def part_labels(P, pts):
     """Label of the nearest primitive per point.
 

@@ -8,18 +8,19 @@ topology (link condition: the two end points share exactly the two opposite
 vertices of their common triangles), does not flip or nearly flip a
 triangle, and does not create a needle triangle.
 """
-import numba
 import numpy as np
 
+from tg_intrinsic.geometry.jit import jit
 
-@numba.njit(cache=True)
+
+@jit
 def _tri_normal(ax, ay, az, bx, by, bz, cx, cy, cz):
     ux, uy, uz = bx - ax, by - ay, bz - az
     vx, vy, vz = cx - ax, cy - ay, cz - az
     return uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
 
 
-@numba.njit(cache=True)
+@jit
 def _quality(ax, ay, az, bx, by, bz, cx, cy, cz):
     nx, ny, nz = _tri_normal(ax, ay, az, bx, by, bz, cx, cy, cz)
     area2 = np.sqrt(nx * nx + ny * ny + nz * nz)  # twice the area
@@ -31,14 +32,14 @@ def _quality(ax, ay, az, bx, by, bz, cx, cy, cz):
     return 2.0 * np.sqrt(3.0) * area2 / s  # 1 for equilateral
 
 
-@numba.njit(cache=True)
+@jit
 def _qeval(Q, x, y, z):
     return (Q[0] * x * x + 2 * Q[1] * x * y + 2 * Q[2] * x * z + 2 * Q[3] * x
             + Q[4] * y * y + 2 * Q[5] * y * z + 2 * Q[6] * y
             + Q[7] * z * z + 2 * Q[8] * z + Q[9])
 
 
-@numba.njit(cache=True)
+@jit
 def _edge_cost(Q, V, u, v, lam, out, q):
     for t in range(10):
         q[t] = Q[u, t] + Q[v, t]
@@ -84,7 +85,7 @@ def _edge_cost(Q, V, u, v, lam, out, q):
     return max(best, 0.0) + lam * elen2 * elen2
 
 
-@numba.njit(cache=True)
+@jit
 def _plane_quadrics(V, F):
     Q = np.zeros((V.shape[0], 10))
     for f in range(F.shape[0]):
@@ -113,7 +114,7 @@ def _plane_quadrics(V, F):
     return Q
 
 
-@numba.njit(cache=True)
+@jit
 def _link_ok(F, falive, head, nxt, mark, mark2, stamp, u, v):
     """Link condition for a closed manifold: u and v share exactly the two
     opposite vertices of their two common triangles."""
@@ -142,7 +143,7 @@ def _link_ok(F, falive, head, nxt, mark, mark2, stamp, u, v):
     return common == 2 and shared == 2
 
 
-@numba.njit(cache=True)
+@jit
 def _geometry_ok(V, F, falive, head, nxt, u, v, px, py, pz, min_quality,
                  max_normal_turn):
     """No triangle around the collapse flips (turns by more than
@@ -183,7 +184,7 @@ def _geometry_ok(V, F, falive, head, nxt, u, v, px, py, pz, min_quality,
     return True
 
 
-@numba.njit(cache=True)
+@jit
 def decimate(V, F, target, seed=0, lam=0.05, min_quality=0.05,
              max_normal_turn=0.3, choices=8):
     """Collapses edges of the closed manifold mesh ``(V, F)`` until it has
@@ -316,7 +317,7 @@ def decimate(V, F, target, seed=0, lam=0.05, min_quality=0.05,
     return Vout, Fout
 
 
-@numba.njit(cache=True)
+@jit
 def _segment_hits_triangle(V, p, q, a, b, c):
     """Whether segment V[p]V[q] crosses triangle (a, b, c) (Moller-Trumbore,
     parallel configurations count as no hit)."""
@@ -348,7 +349,7 @@ def _segment_hits_triangle(V, p, q, a, b, c):
     return 0.0 <= t <= 1.0
 
 
-@numba.njit(cache=True)
+@jit
 def _triangles_intersect(V, F, f, g):
     for s in range(3):
         if _segment_hits_triangle(V, F[f, s], F[f, (s + 1) % 3], F[g, 0],
@@ -360,7 +361,7 @@ def _triangles_intersect(V, F, f, g):
     return False
 
 
-@numba.njit(cache=True)
+@jit
 def _count_intersecting(V, F, pairs):
     hits = 0
     for k in range(pairs.shape[0]):

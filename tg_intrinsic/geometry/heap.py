@@ -1,9 +1,9 @@
 """A binary min-heap on two parallel arrays (keys, values) for the numba
 shortest-path kernels (fast marching, graph Voronoi, Dijkstra)."""
-from numba import njit
+from .jit import jit
 
 
-@njit(cache=True)
+@jit
 def sift_up(hd, hv, k):  # pragma: no cover (numba)
     """Moves entry ``k`` of a binary min-heap (keys ``hd``, values ``hv``)
     up to its place."""
@@ -16,7 +16,7 @@ def sift_up(hd, hv, k):  # pragma: no cover (numba)
         k = parent
 
 
-@njit(cache=True)
+@jit
 def sift_down(hd, hv, k, size):  # pragma: no cover (numba)
     """Moves entry ``k`` of a binary min-heap of ``size`` entries (keys
     ``hd``, values ``hv``) down to its place."""

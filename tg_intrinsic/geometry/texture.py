@@ -17,11 +17,11 @@ from typing import Tuple
 
 import numpy as np
 import torch
-from numba import njit
 from torch import Tensor
 
 from .checks import (check_faces, check_image_size, check_index,
                      check_points, check_positive_int, check_unit_interval)
+from .jit import jit
 
 __all__ = ['rasterize_uv', 'texture_grid_edges', 'uv_sphere', 'uv_atlas',
            'bake_texture']
@@ -32,7 +32,7 @@ __all__ = ['rasterize_uv', 'texture_grid_edges', 'uv_sphere', 'uv_atlas',
 _EDGE_TOLERANCE = 1e-9
 
 
-@njit(cache=True)
+@jit
 def _rasterize_uv_kernel(corners, height, width, tol):  # pragma: no cover
     """Owner triangle (-1: none) and barycentrics of every texel centre,
     triangles in index order, a texel keeping the first one that covers

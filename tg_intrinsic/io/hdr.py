@@ -20,8 +20,8 @@ import zipfile
 
 import numpy as np
 import torch
-from numba import njit
 
+from tg_intrinsic.geometry.jit import jit
 from tg_intrinsic.utils import atomic_write
 
 _MAGIC = (b'#?RADIANCE', b'#?RGBE')
@@ -32,7 +32,7 @@ _OK, _TRUNCATED, _BAD_RUN, _BAD_WIDTH = 0, 1, 2, 3
 
 
 # ------------------------------------------------------------------ kernels
-@njit(cache=True)
+@jit
 def _decode_rgbe(data, pos, height, width, out):
     """Decodes ``height`` scanlines of ``width`` RGBE pixels from ``data``
     (uint8) starting at byte ``pos`` into ``out`` (height, width, 4).
@@ -102,7 +102,7 @@ def _decode_rgbe(data, pos, height, width, out):
     return _OK, height, pos
 
 
-@njit(cache=True)
+@jit
 def _encode_rle(rgbe, out):
     """New-style RLE of (height, width, 4) uint8 scanlines into ``out``:
     runs of 4 or more equal bytes (at most 127) become two bytes, the rest

@@ -22,7 +22,8 @@ import os
 from typing import Optional, Tuple
 
 import numpy as np
-from numba import njit
+
+from tg_intrinsic.geometry.jit import jit
 
 from .points import read_table
 
@@ -97,7 +98,7 @@ def check_labels(labels: np.ndarray, path: str, offset: int = 0,
     return shifted
 
 
-@njit(cache=True)
+@jit
 def _keep_first_directed(ids, keep, num_ids):  # pragma: no cover (numba)
     # MeshCNN's remove_non_manifolds: walk the faces in order; drop a face
     # if one of its directed edges belongs to an earlier kept face.

@@ -2,12 +2,13 @@ from typing import Optional
 
 import numpy as np
 import torch
-from numba import njit, prange
+from numba import prange
 from torch import Tensor
 from torch_geometric.nn import global_max_pool as scatter_max_pool
 from torch_geometric.utils import to_dense_batch
 
 from tg_intrinsic.geometry.checks import compiling
+from tg_intrinsic.geometry.jit import jit
 
 
 class _DenseMax(torch.autograd.Function):
@@ -49,7 +50,7 @@ def _numpy(t: Tensor) -> np.ndarray:
     return t.detach().numpy()
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _max_and_ties(dense):  # pragma: no cover (numba)
     b_size, n, c = dense.shape
     out = np.empty((b_size, c), dtype=dense.dtype)
@@ -73,7 +74,7 @@ def _max_and_ties(dense):  # pragma: no cover (numba)
     return out, ties
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _spread_to_maxima(dense, out, ties, grad, result):  # pragma: no cover
     b_size, n, c = dense.shape
     for task in prange(b_size * c):

@@ -4,10 +4,12 @@ random probes), the matrix-vector product and the Galerkin product R A P
 in one parallel pass."""
 import numpy as np
 import scipy.sparse as sp
-from numba import get_num_threads, njit, prange
+from numba import get_num_threads, prange
+
+from tg_intrinsic.geometry.jit import jit
 
 
-@njit(cache=True)
+@jit
 def _mix(h, word):  # pragma: no cover (numba)
     # splitmix64 finaliser over the running state
     h = (h ^ word) * np.uint64(0x9E3779B97F4A7C15)
@@ -16,7 +18,7 @@ def _mix(h, word):  # pragma: no cover (numba)
     return h ^ (h >> np.uint64(27))
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _hash_blocks(words, seed, blocks):  # pragma: no cover (numba)
     """One hash per block of words (in parallel), then the hash of those."""
     out = np.empty(blocks, dtype=np.uint64)
@@ -85,7 +87,7 @@ def matvec(A: sp.csr_matrix, x: np.ndarray) -> np.ndarray:
     return A @ x
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _triple_rows(r_ptr, r_idx, r_val, a_ptr, a_idx, a_val, p_ptr, p_idx,
                  p_val, n_cols, rows, width, counts, cols, vals,
                  blocks):  # pragma: no cover (numba)
@@ -127,7 +129,7 @@ def _triple_rows(r_ptr, r_idx, r_val, a_ptr, a_idx, a_val, p_ptr, p_idx,
                     cols[b + 1], vals[b + 1] = col, value
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _pack_rows(indptr, width, cols, vals, spill, spill_width, spill_cols,
                spill_vals):  # pragma: no cover (numba)
     """CSR indices and data from rows in slots (a row ``r`` with

@@ -9,11 +9,12 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
-from numba import njit
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from torch import Tensor
 from torch_geometric.data import Data
+
+from tg_intrinsic.geometry.jit import jit
 
 # Triangles with area at most this times their longest edge squared are
 # degenerate (heights below 2e-5 of the longest edge): above the float32
@@ -232,7 +233,7 @@ def manifold_subset(face: Tensor, num_vertices: int,
     return torch.from_numpy(np.flatnonzero(keep)).to(face.device)
 
 
-@njit(cache=True)
+@jit
 def _greedy_manifold(undirected, directed, order):  # pragma: no cover
     m = undirected.shape[0]
     uses = np.zeros(undirected.max() + 1, dtype=np.int64)

@@ -18,6 +18,7 @@ import torch
 import torch.autograd.forward_ad as forward_ad
 from torch import Tensor
 
+from ..jit import jit
 from .sh import (num_coefficients, power_spectrum, real_sh, schlick_fresnel,
                  smith_g1)
 
@@ -464,13 +465,13 @@ def _grid_cpu(cross, square, const, ks2, scale):
 _NEGLIGIBLE = 50.0
 
 
-@numba.njit(inline='always', fastmath=True, cache=True)
+@jit(inline='always', fastmath=True)
 def _distance(const, cross, square, u):  # pragma: no cover (numba)
     """D of eq. 5.19 at K_s^2 = u, clamped at 0 against rounding."""
     return max(const - 2 * u * cross + u * u * square, 0.0)
 
 
-@numba.njit(parallel=True, fastmath=True, cache=True)
+@jit(parallel=True, fastmath=True)
 def _grid_kernel(cross, square, const, ks2, scale, entropy, p_best, r_index,
                  ks_index):  # pragma: no cover (numba)
     n, channels, num_r = cross.shape

@@ -36,11 +36,12 @@ from typing import Optional, Tuple
 
 import numpy as np
 import torch
-from numba import njit, prange
+from numba import prange
 from torch import Tensor
 
 from ..checks import (check_choice, check_points, check_positive_int,
                       check_seed, check_tensor)
+from ..jit import jit
 from ..pointcloud.frames import tangent_frames
 from .brdf import model_alpha
 from .cameras import look_at_cameras
@@ -396,7 +397,7 @@ def _irradiance(normal: Tensor, environment: _Environment, visible
     return torch.cat(out)
 
 
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def _smith_g1(c, alpha):  # pragma: no cover (numba)
     """:func:`~tg_intrinsic.geometry.appearance.sh.smith_g1` of one
     cosine."""
@@ -407,7 +408,7 @@ def _smith_g1(c, alpha):  # pragma: no cover (numba)
     return 2 * c / max(c + root, 1e-30)
 
 
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def _sample_weight(cos_o, g1_out, alpha, in_z, cos_h, env_density,
                    brdf_samples, light_samples):  # pragma: no cover (numba)
     """The balance-heuristic weight of one sample of either strategy, as
@@ -423,7 +424,7 @@ def _sample_weight(cos_o, g1_out, alpha, in_z, cos_h, env_density,
                            + light_samples * env_density, 1e-300)
 
 
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def _schlick(ox, oy, oz, hx, hy, hz):  # pragma: no cover (numba)
     """Schlick's weight (1 - o . h)^5, the dot clamped to [0, 1]."""
     t = 1 - min(max(ox * hx + oy * hy + oz * hz, 0.0), 1.0)
@@ -431,7 +432,7 @@ def _schlick(ox, oy, oz, hx, hy, hz):  # pragma: no cover (numba)
     return t2 * t2 * t
 
 
-@njit(cache=True, parallel=True, fastmath=True)
+@jit(parallel=True, fastmath=True)
 def _tables_kernel(frames, view_dirs, pair_point, pair_view, alphas,
                    uniforms, light_local, light, light_density, env,
                    pixel_density, visibility, grid_rows,

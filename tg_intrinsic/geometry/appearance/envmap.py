@@ -16,10 +16,11 @@ import math
 
 import numpy as np
 import torch
-from numba import njit, prange
+from numba import prange
 from torch import Tensor
 
 from ..checks import check_positive_int, check_tensor
+from ..jit import jit
 
 
 def check_envmap(envmap, name: str = 'envmap') -> Tensor:
@@ -85,7 +86,7 @@ def direction_to_equirect(directions: Tensor, height: int, width: int):
                                                                    math.pi))
 
 
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def env_coords(dx, dy, dz, height, width):  # pragma: no cover (numba)
     """Continuous pixel coordinates (row, col) of a unit direction, as
     :func:`~tg_intrinsic.geometry.appearance.envmap.direction_to_equirect`."""
@@ -96,7 +97,7 @@ def env_coords(dx, dy, dz, height, width):  # pragma: no cover (numba)
                                                          (2 * math.pi))
 
 
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def bilinear_rgb(env, row, col):  # pragma: no cover (numba)
     """Bilinear radiance at continuous pixel coordinates, exactly as
     :func:`~tg_intrinsic.geometry.appearance.envmap.equirect_lookup` (wrapping in
@@ -160,7 +161,7 @@ def equirect_lookup(envmap: Tensor, directions: Tensor) -> Tensor:
     return top * (1 - fr) + bottom * fr
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _lookup_rgb(env, dirs):  # pragma: no cover (numba)
     out = np.empty((dirs.shape[0], 3))
     height, width = env.shape[0], env.shape[1]

@@ -27,11 +27,12 @@ import math
 
 import numpy as np
 import torch
-from numba import njit, prange
+from numba import prange
 from torch import Tensor
 
 from ..checks import (check_points, check_positive_int, check_seed,
                       check_tensor, check_unit_interval, check_unit_rows)
+from ..jit import jit
 from .envmap import bilinear_rgb, check_envmap, env_coords, equirect_lookup
 from .sh import principled_to_torrance_sparrow
 
@@ -39,7 +40,7 @@ __all__ = ['render_radiance']
 
 
 # ----------------------------------------------------------- small kernels
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def _mix64(x):  # pragma: no cover (numba)
     # splitmix64 finaliser: a well-mixed 64-bit hash of a 64-bit integer
     x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
@@ -47,7 +48,7 @@ def _mix64(x):  # pragma: no cover (numba)
     return x ^ (x >> np.uint64(31))
 
 
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def _hash_uniform(seed, i, j, k):  # pragma: no cover (numba)
     """A uniform number in [0, 1) determined by four integers: the random
     lattice shift of one (point, view) pair, independent of threading."""
@@ -67,13 +68,13 @@ def _lookup(env: np.ndarray, dirs: np.ndarray) -> np.ndarray:
                            ).numpy()
 
 
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def _ggx_d(cos_h, alpha2):  # pragma: no cover (numba)
     k = cos_h * cos_h * (alpha2 - 1.0) + 1.0
     return alpha2 / (math.pi * k * k)
 
 
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def _smith_g1(c, alpha2):  # pragma: no cover (numba)
     if c <= 0.0:
         return 0.0
@@ -81,7 +82,7 @@ def _smith_g1(c, alpha2):  # pragma: no cover (numba)
     return 2.0 * c / (c + math.sqrt(alpha2 + (1.0 - alpha2) * c * c))
 
 
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def _onb(nx, ny, nz):  # pragma: no cover (numba)
     # Duff et al. 2017: a continuous-almost-everywhere tangent frame
     sign = 1.0 if nz >= 0.0 else -1.0
@@ -91,7 +92,7 @@ def _onb(nx, ny, nz):  # pragma: no cover (numba)
             b, sign + ny * ny * a, -ny)
 
 
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def _sample_vndf(wx, wy, wz, alpha, u1, u2):  # pragma: no cover (numba)
     """A GGX normal (local frame, z = normal) distributed as the normals
     visible from ``w``, :math:`D_{\\omega}(h) = G_1(\\omega)
@@ -158,7 +159,7 @@ def _diffuse_tables(env: np.ndarray, min_rows: int):
             cells, hq, wq)
 
 
-@njit(cache=True)
+@jit
 def _cell_summaries(dirs, weight, cells, hq, wq):  # pragma: no cover
     num = cells.shape[0]
     moment = np.zeros((num, 3, 3))  # channel, xyz
@@ -195,7 +196,7 @@ def _cell_summaries(dirs, weight, cells, hq, wq):  # pragma: no cover
     return moment, centre, sin_radius
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _irradiance_kernel(normal, dirs, weight, cells, moment, centre,
                        sin_radius):  # pragma: no cover (numba)
     """:math:`E(\\mathbf{n}) = \\sum_p L_p \\Omega_p \\max(0, \\mathbf{n}
@@ -267,7 +268,7 @@ def _light_tables(env: np.ndarray):
     return row_cdf, col_cdf, np.ascontiguousarray(density)
 
 
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def _search(cdf, u):  # pragma: no cover (numba)
     """Largest k with cdf[k] <= u < cdf[k + 1] and a non-empty interval."""
     lo, hi = 0, cdf.shape[0] - 1
@@ -280,7 +281,7 @@ def _search(cdf, u):  # pragma: no cover (numba)
     return lo
 
 
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def _env_density(density, row, col):  # pragma: no cover (numba)
     height, width = density.shape
     i = min(max(np.int64(math.floor(row)), 0), height - 1)
@@ -288,7 +289,7 @@ def _env_density(density, row, col):  # pragma: no cover (numba)
     return density[i, j]
 
 
-@njit(cache=True, parallel=True, fastmath=True)
+@jit(parallel=True, fastmath=True)
 def _specular_kernel(normal, r0, alpha, view, mask, env, num_brdf,
                      num_light, row_cdf, col_cdf, density,
                      seed):  # pragma: no cover (numba)

@@ -15,65 +15,74 @@ import math
 
 import numpy as np
 import torch
-from numba import njit, prange
+from numba import prange
 from torch import Tensor
 
 from ..checks import (check_cameras, check_faces, check_points,
                       check_positive_float, check_positive_int)
+from ..jit import jit
 
 __all__ = ['rasterize', 'point_visibility', 'cameras_numpy', 'mesh_numpy',
            'to_camera']
 
 
 # ------------------------------------------------------------ rasteriser
-@njit(cache=True, parallel=True)
+@jit
+def _face_extent(cam, faces, K, near, height, width, f,
+                 ext):  # pragma: no cover (numba)
+    """Screen extent ``ext[f] = (vmin, vmax, umin, umax)`` of the part of
+    triangle ``f`` in front of the near plane (the triangle clipped
+    against z = near by Sutherland-Hodgman, at most four corners,
+    projected), clamped to a margin around the image; ``vmin > vmax``
+    when nothing is in front. Serial, so that serial kernels can call it
+    too (see :mod:`tg_intrinsic.geometry.jit`)."""
+    umin, vmin = np.inf, np.inf
+    umax, vmax = -np.inf, -np.inf
+    count = 0
+    for e in range(3):
+        p = cam[faces[f, e]]
+        q = cam[faces[f, (e + 1) % 3]]
+        pin = p[2] >= near
+        qin = q[2] >= near
+        for which in range(2):
+            # the corner p if inside, then the crossing of edge p-q
+            if which == 0:
+                if not pin:
+                    continue
+                x, y, z = p[0], p[1], p[2]
+            else:
+                if pin == qin:
+                    continue
+                t = (near - p[2]) / (q[2] - p[2])
+                x = p[0] + t * (q[0] - p[0])
+                y = p[1] + t * (q[1] - p[1])
+                z = near
+            u = (K[0, 0] * x + K[0, 1] * y) / z + K[0, 2]
+            v = (K[1, 1] * y) / z + K[1, 2]
+            umin, umax = min(umin, u), max(umax, u)
+            vmin, vmax = min(vmin, v), max(vmax, v)
+            count += 1
+    if count == 0:
+        ext[f, 0], ext[f, 1], ext[f, 2], ext[f, 3] = 1.0, 0.0, 1.0, 0.0
+        return
+    # near-plane corners project far away: clamp before any int cast
+    ext[f, 0] = min(max(vmin, -2.0), height + 2.0)
+    ext[f, 1] = min(max(vmax, -2.0), height + 2.0)
+    ext[f, 2] = min(max(umin, -2.0), width + 2.0)
+    ext[f, 3] = min(max(umax, -2.0), width + 2.0)
+
+
+@jit(parallel=True)
 def _face_extents(cam, faces, K, near, height, width):  # pragma: no cover
-    """Screen extent ``(vmin, vmax, umin, umax)`` of the part of every
-    triangle in front of the near plane (the triangle clipped against
-    z = near by Sutherland-Hodgman, at most four corners, projected),
-    clamped to a margin around the image; ``vmin > vmax`` when nothing is
-    in front."""
+    """:func:`_face_extent` of every triangle, in parallel."""
     num = faces.shape[0]
     ext = np.empty((num, 4))
     for f in prange(num):
-        umin, vmin = np.inf, np.inf
-        umax, vmax = -np.inf, -np.inf
-        count = 0
-        for e in range(3):
-            p = cam[faces[f, e]]
-            q = cam[faces[f, (e + 1) % 3]]
-            pin = p[2] >= near
-            qin = q[2] >= near
-            for which in range(2):
-                # the corner p if inside, then the crossing of edge p-q
-                if which == 0:
-                    if not pin:
-                        continue
-                    x, y, z = p[0], p[1], p[2]
-                else:
-                    if pin == qin:
-                        continue
-                    t = (near - p[2]) / (q[2] - p[2])
-                    x = p[0] + t * (q[0] - p[0])
-                    y = p[1] + t * (q[1] - p[1])
-                    z = near
-                u = (K[0, 0] * x + K[0, 1] * y) / z + K[0, 2]
-                v = (K[1, 1] * y) / z + K[1, 2]
-                umin, umax = min(umin, u), max(umax, u)
-                vmin, vmax = min(vmin, v), max(vmax, v)
-                count += 1
-        if count == 0:
-            ext[f, 0], ext[f, 1], ext[f, 2], ext[f, 3] = 1.0, 0.0, 1.0, 0.0
-            continue
-        # near-plane corners project far away: clamp before any int cast
-        ext[f, 0] = min(max(vmin, -2.0), height + 2.0)
-        ext[f, 1] = min(max(vmax, -2.0), height + 2.0)
-        ext[f, 2] = min(max(umin, -2.0), width + 2.0)
-        ext[f, 3] = min(max(umax, -2.0), width + 2.0)
+        _face_extent(cam, faces, K, near, height, width, f, ext)
     return ext
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _face_boxes(cam, faces, K, near, height, width):  # pragma: no cover
     """Inclusive pixel ranges ``(i0, i1, j0, j1)`` whose centres
     :math:`(j + \\frac12, i + \\frac12)` may fall in each triangle's
@@ -92,14 +101,14 @@ def _face_boxes(cam, faces, K, near, height, width):  # pragma: no cover
     return box
 
 
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def _triple(ax, ay, az, bx, by, bz, cx, cy, cz):  # pragma: no cover
     # a . (b x c)
     return (ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz)
             + az * (bx * cy - by * cx))
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _rasterize_kernel(cam, faces, K, Kinv, near, height,
                       width):  # pragma: no cover (numba)
     """Ray casting through pixel centres with a z-buffer. A ray
@@ -168,15 +177,20 @@ def _rasterize_kernel(cam, faces, K, Kinv, near, height,
     return face_id, bary, depth
 
 
-@njit(cache=True)
+@jit
 def _screen_grid(cam, faces, K, near, height,
                  width):  # pragma: no cover (numba)
     """Candidate triangles of the rays through the image: a screen grid
     (about 2F cells, finer than the pixels for fine meshes) holding
     every triangle whose clipped extent overlaps the cell, as CSR
-    ``(count, entries)`` with the grid's shape and scales."""
-    ext = _face_extents(cam, faces, K, near, height, width)
+    ``(count, entries)`` with the grid's shape and scales. Serial: it runs
+    inside the parallel loop over the cameras of
+    :func:`_cameras_visibility_kernel`, and a serial kernel must not call
+    a parallel one (see :mod:`tg_intrinsic.geometry.jit`)."""
     num_faces = faces.shape[0]
+    ext = np.empty((num_faces, 4))
+    for f in range(num_faces):
+        _face_extent(cam, faces, K, near, height, width, f, ext)
     # about half a triangle per cell when they cover the image evenly: with
     # a cell of slack around each triangle's extent, coarser cells list
     # several times more candidates per ray (measured: 2562 points seen
@@ -219,7 +233,7 @@ def _screen_grid(cam, faces, K, near, height,
     return count, entries, gh, gw, sy, sx
 
 
-@njit(cache=True, inline='always')
+@jit(inline='always')
 def _sees(px, py, pz, cam, faces, K, near, height, width, count, entries,
           gh, gw, sy, sx, limit):  # pragma: no cover (numba)
     """Whether the camera sees the point (camera frame): in the image, in
@@ -258,7 +272,7 @@ def _sees(px, py, pz, cam, faces, K, near, height, width, count, entries,
     return True
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _visibility_kernel(cam, faces, K, near, height, width, points,
                        rel_tol):  # pragma: no cover (numba)
     """Ray casting from the camera centre to every point (in parallel over
@@ -274,7 +288,7 @@ def _visibility_kernel(cam, faces, K, near, height, width, points,
     return visible
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _cameras_visibility_kernel(vertices, faces, K, E, near, height, width,
                                points, needed,
                                rel_tol):  # pragma: no cover (numba)

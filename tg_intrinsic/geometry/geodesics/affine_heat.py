@@ -35,16 +35,17 @@ orientation the angles are mirrored.
 
 from concurrent.futures import ThreadPoolExecutor
 
-import numba
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
+
+from ..jit import jit
 
 #: Sources solved together (right-hand side columns) at most.
 CENTRE_CHUNK = 256
 
 
-@numba.njit(cache=True)
+@jit
 def _signposts(corner_ptr, corner_list, corner_next, corner_angle, signpost,
                total, is_open):  # pragma: no cover (numba)
     """The angle of every halfedge at its tail, counter-clockwise from the
@@ -74,7 +75,7 @@ def _signposts(corner_ptr, corner_list, corner_next, corner_angle, signpost,
         total[v] = angle
 
 
-@numba.njit(cache=True)
+@jit
 def _opposite_cot(a, b, c):  # pragma: no cover (numba)
     """Cotangent of the angle opposite side ``c`` in a triangle with sides
     a, b, c."""
@@ -83,14 +84,14 @@ def _opposite_cot(a, b, c):  # pragma: no cover (numba)
     return (a * a + b * b - c * c) / (4.0 * area)
 
 
-@numba.njit(cache=True)
+@jit
 def _law_of_cosines(a, b, c):  # pragma: no cover (numba)
     """The angle between sides a and b of a triangle with sides a, b, c."""
     cos = (a * a + b * b - c * c) / (2.0 * a * b)
     return np.arccos(min(1.0, max(-1.0, cos)))
 
 
-@numba.njit(cache=True)
+@jit
 def _flip_to_delaunay(tail, nxt, twin, face_of, face_he, length, signpost,
                       total, is_open, degree):  # pragma: no cover (numba)
     """Intrinsic edge flips until every interior edge is Delaunay (its
@@ -288,7 +289,7 @@ class MeshTangentData:
 # once for a whole block of columns (stored row-major, so the inner loop is
 # contiguous), about ten times faster for real and five for complex ones.
 # They release the GIL, so blocks of sources are solved in threads.
-@numba.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def _lower_real(indptr, indices, value, x):  # pragma: no cover (numba)
     for j in range(x.shape[0]):
         for p in range(indptr[j], indptr[j + 1]):
@@ -299,7 +300,7 @@ def _lower_real(indptr, indices, value, x):  # pragma: no cover (numba)
                     x[i, c] -= a * x[j, c]
 
 
-@numba.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def _upper_real(indptr, indices, value, inv_diag, x):  # pragma: no cover
     for j in range(x.shape[0] - 1, -1, -1):
         for c in range(x.shape[1]):
@@ -312,7 +313,7 @@ def _upper_real(indptr, indices, value, inv_diag, x):  # pragma: no cover
                     x[i, c] -= a * x[j, c]
 
 
-@numba.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def _lower_complex(indptr, indices, re, im, xr, xi):  # pragma: no cover
     for j in range(xr.shape[0]):
         for p in range(indptr[j], indptr[j + 1]):
@@ -324,7 +325,7 @@ def _lower_complex(indptr, indices, re, im, xr, xi):  # pragma: no cover
                     xi[i, c] -= a * xi[j, c] + b * xr[j, c]
 
 
-@numba.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def _upper_complex(indptr, indices, re, im, inv_re, inv_im, xr,
                    xi):  # pragma: no cover (numba)
     for j in range(xr.shape[0] - 1, -1, -1):
@@ -342,7 +343,7 @@ def _upper_complex(indptr, indices, re, im, inv_re, inv_im, xr,
                     xi[i, c] -= a * xi[j, c] + b * xr[j, c]
 
 
-@numba.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def _gather(col, row_w, row_z, w, zr, zi, k, r, psi, beta
             ):  # pragma: no cover (numba)
     """Per pair: the log map ``z / (w X/|X|)`` in polar form (r, psi) and

@@ -24,9 +24,10 @@ first-order accurate on curved ones; plain Dijkstra on edges overestimates
 distances by up to 15 % even on regular meshes.
 """
 import numpy as np
-from numba import get_num_threads, njit, prange
+from numba import get_num_threads, prange
 
 from ..heap import sift_down, sift_up
+from ..jit import jit
 
 # At most this many relaxation sweeps after marching (see :func:`march`):
 # on a jittered flat grid 3 leave 2 % worst-case error (16 leave none) and
@@ -49,7 +50,7 @@ def surface_index(pos: np.ndarray, face: np.ndarray):
             (order % 3).astype(np.int64), np.ascontiguousarray(length))
 
 
-@njit(cache=True)
+@jit
 def _unfold(ab, ac, bc, da, db):  # pragma: no cover (numba)
     """Distance to corner c of a triangle with edge lengths ``ab``, ``ac``,
     ``bc`` from a virtual source seen at ``da`` from a and ``db`` from b;
@@ -71,7 +72,7 @@ def _unfold(ab, ac, bc, da, db):  # pragma: no cover (numba)
     return np.sqrt((xc - xs) ** 2 + dy * dy)
 
 
-@njit(cache=True)
+@jit
 def march(face, length, vf_ptr, vf_face, vf_corner, sources, limit, cap,
           tol, dist, final, touched, where, out_v,
           out_d):  # pragma: no cover (numba)
@@ -197,7 +198,7 @@ def march(face, length, vf_ptr, vf_face, vf_corner, sources, limit, cap,
     return count
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def march_many(face, length, vf_ptr, vf_face, vf_corner, num, sources, limit,
                keep, cap, tol, slot, out_v, out_d, count,
                blocks):  # pragma: no cover (numba)

@@ -28,7 +28,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 import torch
-from numba import get_num_threads, njit, prange
+from numba import get_num_threads, prange
 from torch import Tensor
 
 from . import vector_heat as _vector_heat
@@ -37,6 +37,7 @@ from ..checks import (check_edge_index, check_faces, check_frames,
                       check_points, check_positive_float, check_positive_int,
                       check_referenced, check_tensor, check_vectors,
                       same_device)
+from ..jit import jit
 from ..mesh import (edge_face_counts, face_areas, lumped_mass,
                     triangle_cross, vertex_normals)
 from ..pointcloud.frames import tangent_frames
@@ -191,7 +192,7 @@ def _fast_numba(pos: Tensor, frame: Tensor, edge_index: Tensor
     return out[0], out[1], out[2]
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _fast_kernel(pos, frame, nbr, ctr, out):  # pragma: no cover (numba)
     """:func:`_fast_torch`, edge by edge."""
     for e in prange(nbr.shape[0]):
@@ -896,7 +897,7 @@ def vertex_area_weights(pos: Tensor, face: Optional[Tensor] = None,
     return torch.from_numpy(area).to(pos.dtype).to(pos.device)
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _voronoi_areas(pos, frame, nbr):  # pragma: no cover (numba)
     """Tangent-plane Voronoi cell area of every point among its neighbours:
     an octagon clipped by the bisector half-planes (Sutherland-Hodgman)."""

@@ -9,10 +9,11 @@ from typing import List, NamedTuple
 
 import numpy as np
 import torch
-from numba import njit, prange
+from numba import prange
 from torch import Tensor
 
 from ..checks import check_choice, check_edge_index, check_points
+from ..jit import jit
 from .voronoi import dijkstra_from
 
 WEIGHTINGS = ('barycentric', 'inverse_distance', 'uniform')
@@ -42,7 +43,7 @@ def _csr(edge_index: np.ndarray, n: int):
     return _csr_kernel(src, dst, n)
 
 
-@njit(cache=True)
+@jit
 def _csr_kernel(src, dst, n):  # pragma: no cover (numba)
     indptr = np.zeros(n + 1, dtype=np.int64)
     for e in range(src.shape[0]):
@@ -85,7 +86,7 @@ def _csr_kernel(src, dst, n):  # pragma: no cover (numba)
     return indptr, indices[:out].copy()
 
 
-@njit(cache=True)
+@jit
 def _edge_lengths(indptr, indices, pos):  # pragma: no cover (numba)
     length = np.empty(indices.shape[0])
     for v in range(indptr.shape[0] - 1):
@@ -97,7 +98,7 @@ def _edge_lengths(indptr, indices, pos):  # pragma: no cover (numba)
     return length
 
 
-@njit(cache=True)
+@jit
 def _sample_sweep(indptr, indices, length, radius):  # pragma: no cover
     """Keeps every still-eligible point (in index order); the neighbours
     closer than ``radius``, and their neighbours within that path length,
@@ -137,7 +138,7 @@ def _sample_sweep(indptr, indices, length, radius):  # pragma: no cover
     return sample[:m].copy(), dist, nearest
 
 
-@njit(cache=True)
+@jit
 def _coarse_edges(indptr, indices, cluster):  # pragma: no cover (numba)
     """The pairs of cells that touch: (cluster[v], cluster[u]) for every
     fine edge v < u that crosses cells."""
@@ -158,7 +159,7 @@ def _coarse_edges(indptr, indices, cluster):  # pragma: no cover (numba)
     return src, dst
 
 
-@njit(cache=True)
+@jit
 def _triangles(indptr, indices):  # pragma: no cover (numba)
     """All 3-cliques (a < b < c) of a graph with sorted CSR rows."""
     count = 0
@@ -191,7 +192,7 @@ def _triangles(indptr, indices):  # pragma: no cover (numba)
     return out
 
 
-@njit(cache=True)
+@jit
 def _closest_on_triangle(p, a, b, c):  # pragma: no cover (numba)
     """Barycentric coordinates of the point of triangle abc closest to p
     (Ericson, Real-Time Collision Detection, 5.1.5); scalar arithmetic, as
@@ -233,7 +234,7 @@ def _closest_on_triangle(p, a, b, c):  # pragma: no cover (numba)
     return 1.0 - v - w, v, w
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _prolong(pos, coarse_pos, cluster, tri_ptr, tri_list, triangles,
              nbr_ptr, nbr, mode):  # pragma: no cover (numba)
     """Row of P for every fine point: the closest candidate triangle
@@ -258,7 +259,7 @@ def _prolong(pos, coarse_pos, cluster, tri_ptr, tri_list, triangles,
     return cols, vals
 
 
-@njit(cache=True)
+@jit
 def _closest_triangle(p, coarse_pos, candidates, triangles, uniform, cols,
                       vals):  # pragma: no cover (numba)
     best = np.inf
@@ -283,7 +284,7 @@ def _closest_triangle(p, coarse_pos, candidates, triangles, uniform, cols,
     return best < np.inf
 
 
-@njit(cache=True)
+@jit
 def _inverse_distance(p, coarse_pos, s, neighbours, cols,
                       vals):  # pragma: no cover (numba)
     """Inverse distance weights to the three closest of coarse point s
@@ -314,7 +315,7 @@ def _inverse_distance(p, coarse_pos, s, neighbours, cols,
         vals[k] /= total
 
 
-@njit(cache=True)
+@jit
 def _compact(cols, vals):  # pragma: no cover (numba)
     """The non-zeros of the (N, 3) rows as (2, nnz) indices and weights."""
     nnz = 0

@@ -4,12 +4,12 @@ from typing import Optional, Tuple
 
 import numpy as np
 import torch
-from numba import njit
 from torch import Tensor
 
 from ..checks import (check_edge_index, check_index, check_points,
                       check_tensor)
 from ..heap import sift_down, sift_up
+from ..jit import jit
 
 
 def graph_voronoi(pos: Tensor, edge_index: Tensor, seeds: Tensor,
@@ -76,7 +76,7 @@ def graph_voronoi(pos: Tensor, edge_index: Tensor, seeds: Tensor,
             torch.from_numpy(dist).to(device, pos.dtype))
 
 
-@njit(cache=True)
+@jit
 def _multi_source_dijkstra(indptr, indices, weights, seeds, n
                            ):  # pragma: no cover (numba)
     dist = np.full(n, np.inf)
@@ -85,7 +85,7 @@ def _multi_source_dijkstra(indptr, indices, weights, seeds, n
     return cell, dist
 
 
-@njit(cache=True)
+@jit
 def dijkstra_from(indptr, indices, weights, seeds, dist, cell
                    ):  # pragma: no cover (numba)
     """Multi-source Dijkstra that updates ``dist`` and ``cell`` in place.
@@ -149,7 +149,7 @@ def dijkstra_from(indptr, indices, weights, seeds, dist, cell
         bucket += 1
 
 
-@njit(cache=True)
+@jit
 def _heap_dijkstra_from(indptr, indices, weights, seeds, dist, cell
                         ):  # pragma: no cover (numba)
     heap_d = np.empty(indices.size + seeds.size)

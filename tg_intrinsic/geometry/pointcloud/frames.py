@@ -4,10 +4,11 @@ from typing import Optional
 import numpy as np
 import scipy.sparse as sp
 import torch
-from numba import njit, prange
+from numba import prange
 from torch import Tensor
 
 from ..checks import check_batch, check_points, check_positive_int
+from ..jit import jit
 from .neighbors import knn
 
 
@@ -135,7 +136,7 @@ def _pca_torch(pos: Tensor, neighbours: Tensor):
     return evals, evecs[:, :, 0]
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _pca_numba(pos, neighbours):  # pragma: no cover (numba)
     """Covariance of every patch and its eigen-decomposition by cyclic
     Jacobi rotations (exact to rounding for 3 x 3), parallel over points."""
@@ -332,7 +333,7 @@ def _orient(pos: Tensor, normal: Tensor, neighbours: Tensor,
     return torch.from_numpy(n * flip[:, None]).to(device)
 
 
-@njit(cache=True)
+@jit
 def _unit_ball(pos, ptr):  # pragma: no cover (numba)
     """Every example moved to its bounding-box centre and scaled so that its
     farthest point has norm 1."""
@@ -357,7 +358,7 @@ def _unit_ball(pos, ptr):  # pragma: no cover (numba)
     return out
 
 
-@njit(cache=True)
+@jit
 def _segment_median(values, ptr):  # pragma: no cover (numba)
     out = np.zeros(ptr.shape[0] - 1)
     for ex in range(ptr.shape[0] - 1):
@@ -366,7 +367,7 @@ def _segment_median(values, ptr):  # pragma: no cover (numba)
     return out
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _visibility_votes(q, n, radius, ptr, pixel, dirs, e1, e2,
                       tolerance):  # pragma: no cover (numba)
     """Orthographic z-buffer of the discs (centre q_i, normal n_i, radius
@@ -425,7 +426,7 @@ def _visibility_votes(q, n, radius, ptr, pixel, dirs, e1, e2,
     return votes
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _extreme_votes(q, n, ptr, dirs):  # pragma: no cover (numba)
     """The farthest point of an example along d lies on its convex hull, so
     its outward normal has n . d >= 0: it gets the vote n_i . d."""
@@ -448,7 +449,7 @@ def _extreme_votes(q, n, ptr, dirs):  # pragma: no cover (numba)
     return out
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _solve_blocks(indptr, indices, data, diag, rhs, ptr,
                   tol):  # pragma: no cover (numba)
     """Solves (diag(D) - W) x = b by Jacobi-preconditioned conjugate
@@ -492,7 +493,7 @@ def _solve_blocks(indptr, indices, data, diag, rhs, ptr,
     return x
 
 
-@njit(cache=True)
+@jit
 def _find(parent, parity, i):  # pragma: no cover (numba)
     """Root of i and the sign of i relative to it, compressing the path."""
     root = i
@@ -512,7 +513,7 @@ def _find(parent, parity, i):  # pragma: no cover (numba)
     return root, sign
 
 
-@njit(cache=True)
+@jit
 def _signed_forest(num, src, dst, coupling):  # pragma: no cover (numba)
     """Kruskal's spanning forest over the edges in the given order, with the
     relative sign of every point to its tree's root (s_i s_j = coupling)."""

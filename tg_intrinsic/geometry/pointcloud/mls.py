@@ -21,12 +21,13 @@ from typing import Optional, Tuple
 
 import numpy as np
 import torch
-from numba import njit, prange
+from numba import prange
 from torch import Tensor
 
 from ..checks import (check_batch, check_edge_index, check_points,
                       check_positive_float, check_positive_int, check_tensor,
                       same_device)
+from ..jit import jit
 
 #: Fewest points of an MLS neighbourhood (the point included): a tangent
 #: gradient needs the point and two neighbours off its line; with fewer the
@@ -305,7 +306,7 @@ def _mls_numba(pos, frame, edge_index, h, batch, kernel_width, regularizer):
     return grad_weight, div_weight
 
 
-@njit(cache=True, parallel=True, fastmath=False)
+@jit(parallel=True, fastmath=False)
 def _mls_kernel(pos, frame, ptr, nbr, h_point, kernel_width,
                 regularizer):  # pragma: no cover (numba)
     num_edges = nbr.shape[0]

@@ -31,12 +31,13 @@ from typing import Optional, Tuple
 
 import numpy as np
 import torch
-from numba import njit, prange
+from numba import prange
 from scipy.spatial import cKDTree
 from torch import Tensor
 
 from ..checks import (batch_sizes, check_batch, check_points,
                       check_positive_float, check_positive_int, same_device)
+from ..jit import jit
 
 __all__ = ['knn', 'radius', 'fps']
 
@@ -618,7 +619,7 @@ def _radius_dense(x: Tensor, r: float, batch: Optional[Tensor], cap: int,
 # ----------------------------------------------------------------------------
 # farthest point sampling
 # ----------------------------------------------------------------------------
-@njit(cache=True)
+@jit
 def _fps_update(pts, cur_pt, dist):  # pragma: no cover (numba)
     """dist[i] = min(dist[i], |pts[:, i] - cur_pt|^2); returns the first i of
     the maximum (chosen points hold -1 and stay there)."""
@@ -647,7 +648,7 @@ def _fps_update(pts, cur_pt, dist):  # pragma: no cover (numba)
     return best
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _fps_examples(pos_t, ptr, starts, out_ptr, out):  # pragma: no cover
     """Many examples: one thread per example."""
     for b in prange(ptr.shape[0] - 1):

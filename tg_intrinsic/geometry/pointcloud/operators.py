@@ -26,11 +26,12 @@ from typing import Optional
 
 import numpy as np
 import torch
-from numba import njit, prange
+from numba import prange
 from torch import Tensor
 
 from ..checks import (check_edge_index, check_float_tensor,
                       check_positive_int, check_rows, same_device)
+from ..jit import jit
 from ..precision import LOW_PRECISION, full_precision
 from ..sparse import CSR, sparse_mm
 
@@ -429,7 +430,7 @@ def _(x, crow, neighbor):
     return x.new_empty(crow.size(0) - 1, x.size(1), dtype=torch.long)
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _neighbor_argmax(x, crow, nbr):  # pragma: no cover (numba)
     """Per point and channel, the neighbour holding the maximum (the first
     one on ties); -1 for points without neighbours."""

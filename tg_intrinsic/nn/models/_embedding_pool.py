@@ -15,9 +15,11 @@ their backward passes are numba sweeps over it, the last one writing
 """
 import numpy as np
 import torch
-from numba import njit, prange
+from numba import prange
 from torch import Tensor
 from torch.autograd.function import once_differentiable
+
+from tg_intrinsic.geometry.jit import jit
 
 
 class _EmbedAndPool(torch.autograd.Function):
@@ -115,7 +117,7 @@ def can_fuse(x: Tensor, linear: torch.nn.Linear,
             and norm.track_running_stats and x.size(0) > 1)
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _channel_moments(h):  # pragma: no cover (numba)
     c, n = h.shape
     mean = np.empty(c)
@@ -134,7 +136,7 @@ def _channel_moments(h):  # pragma: no cover (numba)
     return mean, var
 
 
-@njit(inline='always')
+@jit(inline='always')
 def _leaky_factor(z, slope):  # pragma: no cover (numba)
     """a = z * factor: branch-free (random signs mispredict), and one
     formula for the forward and backward sweeps, so tied maxima compare
@@ -142,7 +144,7 @@ def _leaky_factor(z, slope):  # pragma: no cover (numba)
     return slope + (1.0 - slope) * (z > 0.0)
 
 
-@njit(inline='always')
+@jit(inline='always')
 def _grad_z(z, top, spread, share, slope):  # pragma: no cover (numba)
     """dL/dz of one entry: its share of the mean, plus its share of the
     maximum where it attains it."""
@@ -150,7 +152,7 @@ def _grad_z(z, top, spread, share, slope):  # pragma: no cover (numba)
     return (spread + share * (z * factor == top)) * factor
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _pool(h, scale, shift, slope, size):  # pragma: no cover (numba)
     c, n = h.shape
     per = n // size
@@ -177,7 +179,7 @@ def _pool(h, scale, shift, slope, size):  # pragma: no cover (numba)
     return maximum, ties, average
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _bn_sums(h, mean, inv_std, scale, shift, maximum, ties, g_max, g_mean,
              slope, size):  # pragma: no cover (numba)
     c, n = h.shape
@@ -202,7 +204,7 @@ def _bn_sums(h, mean, inv_std, scale, shift, maximum, ties, g_max, g_mean,
     return sum_dz, sum_dz_hat
 
 
-@njit(cache=True, parallel=True)
+@jit(parallel=True)
 def _write_grad_h(h, mean, inv_std, scale, shift, maximum, ties, g_max,
                   g_mean, slope, size, centre, tilt):  # pragma: no cover
     """Overwrites H with dL/dH (BatchNorm's backward with the batch

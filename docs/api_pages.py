@@ -9,7 +9,7 @@ is here."""
 API_PAGES = {
     'tg_intrinsic': ['tg_intrinsic', 'tg_intrinsic.surface_attributes'],
     'geometry': ['tg_intrinsic.geometry', 'tg_intrinsic.geometry.texture',
-                 'tg_intrinsic.geometry.precision',
+                 'tg_intrinsic.geometry.precision', 'tg_intrinsic.geometry.jit',
                  'tg_intrinsic.geometry.sphere_images',
                  'tg_intrinsic.geometry.pointcloud',
                  'tg_intrinsic.geometry.pointcloud.neighbors',

@@ -38,6 +38,12 @@ def _temporary_beside(path: str, make_folder: bool):
             f"elsewhere") from None
 
 
+def os_error_reason(error: OSError) -> str:
+    """An operating-system error's reason in words, without ``[Errno N]``
+    and the file name (``'no space left on device'``)."""
+    return (error.strerror or str(error) or type(error).__name__).lower()
+
+
 def current_umask() -> int:
     """The process's umask (read by setting it and putting it back)."""
     umask = os.umask(0)

@@ -1,6 +1,7 @@
 """tg-intrinsic solve: outputs against the library called directly and a
 direct scipy solve, fairing, bi-Laplacian, the conformal flow, point
 clouds, and every bad input ending in one line with exit code 2."""
+import errno
 import json
 import os
 import subprocess
@@ -237,8 +238,16 @@ def test_a_solve_that_does_not_converge_warns(files, tmp_path, capsys):
                                 '--signal', paths['npy'], '--out', out,
                                 '--max-cycles', '1'] + HIERARCHY, capsys)
     assert code == 0, stderr
-    assert 'tg-intrinsic: warning: GravoMG.solve did not converge: stopped at ' \
-        'max_iter=1 cycles' in stderr, stderr
+    # in the options the user can change, not the library's arguments
+    # (max_iter, method='pcg'; issue 40)
+    warning = [line for line in stderr.splitlines() if 'warning' in line]
+    assert len(warning) == 1, stderr
+    assert warning[0].startswith(
+        'tg-intrinsic: warning: the solve did not converge: stopped at '
+        '--max-cycles 1 cycles with relative residual '), stderr
+    assert warning[0].endswith(
+        'above --tol 1e-08; raise --max-cycles, or use --method pcg'), stderr
+    assert 'max_iter' not in stderr and 'method=' not in stderr
     assert 'NOT converged' in stdout
     with open(os.path.join(out, 'report.json')) as f:
         solver = json.load(f)['solver']
@@ -528,3 +537,280 @@ def test_a_weight_too_small_to_smooth_warns(files, tmp_path, capsys):
     moved, _, _ = read_surface(str(tmp_path / 'out' / 'result.ply'))
     # beyond the bound the surface moves by more than rounding
     assert np.abs(moved - pos * 1e8).max() > 1e-13 * 1e8
+
+
+def test_pcg_that_does_not_converge_names_the_options(files, tmp_path,
+                                                     capsys):
+    paths = files[0]
+    code, _, stderr = cli(['solve', paths['obj'], '--smooth', '1e-2',
+                           '--signal', paths['npy'], '--method', 'pcg',
+                           '--max-cycles', '1', '--tol', '1e-12', '--out',
+                           tmp_path / 'out', '--quiet'] + HIERARCHY, capsys)
+    assert code == 0, stderr
+    assert stderr.startswith('tg-intrinsic: warning: the solve did not '
+                             'converge: stopped at --max-cycles 1 PCG '
+                             'iterations with relative residual ')
+    assert stderr.endswith('above --tol 1e-12; raise --max-cycles\n')
+
+
+# ----------------------------------------------------------------------
+# Issue 40: files from other editors and tools, and what is said when
+# they cannot be used
+
+def test_an_obj_saved_with_a_byte_order_mark(files, tmp_path, capsys):
+    # Notepad saves UTF-8 with a BOM; '\ufeffv 0 0 0' lost the first
+    # vertex: "IndexError: index 161 is out of bounds"
+    paths, pos, face, _, _ = files
+    text = ''.join(f'v {x!r} {y!r} {z!r}\n' for x, y, z in pos.tolist()) \
+        + ''.join(f'f {a} {b} {c}\n' for a, b, c in (face + 1).tolist())
+    path = tmp_path / 'notepad.obj'
+    path.write_text(text, encoding='utf-8-sig')
+    code, _, stderr = cli(['solve', path, '--smooth', '1e-2', '--out',
+                           tmp_path / 'out', '--quiet'], capsys)
+    assert code == 0 and stderr == '', stderr
+    got, got_face, _ = read_surface(str(tmp_path / 'out' / 'result.ply'))
+    assert len(got) == 162 and np.array_equal(got_face, face)
+
+
+def test_a_two_object_obj_is_not_said_to_be_welded(files, tmp_path, capsys):
+    # two closed meshes in one file, an object and a material each
+    _, pos, face, _, _ = files
+    lines = []
+    for k, shift in enumerate((0.0, 5.0)):
+        lines += [f'o part{k}', f'usemtl material{k}']
+        lines += [f'v {x + shift!r} {y!r} {z!r}' for x, y, z in pos.tolist()]
+        lines += [f'f {a} {b} {c}' for a, b, c in
+                  (face + 1 + k * len(pos)).tolist()]
+    path = tmp_path / 'two.obj'
+    path.write_text('\n'.join(lines) + '\n')
+    out = tmp_path / 'out'
+    code, _, stderr = cli(['solve', path, '--smooth', '1e-2', '--out', out,
+                           '--quiet'], capsys)
+    assert code == 0, stderr
+    assert 'welded' not in stderr and stderr == '', stderr
+    with open(out / 'report.json') as f:
+        assert json.load(f)['vertices'] == 2 * len(pos)
+
+
+def _read_binary_ply(path):
+    """An independent reader of a binary little-endian PLY's vertices:
+    ``{name: column}`` in the types of the header."""
+    types = {'char': 'i1', 'uchar': 'u1', 'short': '<i2', 'ushort': '<u2',
+             'int': '<i4', 'uint': '<u4', 'float': '<f4', 'double': '<f8'}
+    data = open(path, 'rb').read()
+    end = data.index(b'end_header\n') + len(b'end_header\n')
+    header = data[:end].decode('ascii').splitlines()
+    assert header[1] == 'format binary_little_endian 1.0'
+    fields, count, element = [], None, None
+    for line in header:
+        words = line.split()
+        if words[0] == 'element':
+            element = words[1]
+            if element == 'vertex':
+                count = int(words[2])
+        elif words[0] == 'property' and element == 'vertex':
+            fields.append((words[2], types[words[1]]))
+    vertices = np.frombuffer(data[end:], dtype=fields, count=count)
+    return {name: vertices[name] for name, _ in fields}
+
+
+@pytest.mark.parametrize('encoding', ['binary', 'ascii'])
+def test_result_ply_keeps_the_input_vertex_properties(tmp_path, capsys,
+                                                      encoding):
+    # colours, normals and a custom property of the input were lost
+    mesh = trimesh.creation.icosphere(2)
+    n = len(mesh.vertices)
+    rng = np.random.default_rng(3)
+    rgb = rng.integers(0, 256, (n, 3)).astype(np.uint8)
+    normal = np.asarray(mesh.vertex_normals, dtype=np.float32)
+    quality = rng.standard_normal(n).astype(np.float32)
+    fields = [('x', '<f4'), ('y', '<f4'), ('z', '<f4'), ('red', 'u1'),
+              ('green', 'u1'), ('blue', 'u1'), ('nx', '<f4'), ('ny', '<f4'),
+              ('nz', '<f4'), ('quality', '<f4')]
+    vertices = np.empty(n, dtype=fields)
+    for k, name in enumerate('xyz'):
+        vertices[name] = mesh.vertices[:, k]
+    for k, name in enumerate(('red', 'green', 'blue')):
+        vertices[name] = rgb[:, k]
+    for k, name in enumerate(('nx', 'ny', 'nz')):
+        vertices[name] = normal[:, k]
+    vertices['quality'] = quality
+    kinds = {'<f4': 'float', 'u1': 'uchar'}
+    header = ['ply', f'format {encoding}'
+              f'{"_little_endian" if encoding == "binary" else ""} 1.0',
+              f'element vertex {n}'] + \
+        [f'property {kinds[t]} {name}' for name, t in fields] + \
+        [f'element face {len(mesh.faces)}',
+         'property list uchar int vertex_indices', 'end_header']
+    path = tmp_path / 'scan.ply'
+    with open(path, 'wb') as f:
+        f.write(('\n'.join(header) + '\n').encode('ascii'))
+        if encoding == 'binary':
+            triangles = np.empty(len(mesh.faces),
+                                 dtype=[('n', 'u1'), ('v', '<i4', (3,))])
+            triangles['n'], triangles['v'] = 3, mesh.faces
+            f.write(vertices.tobytes() + triangles.tobytes())
+        else:
+            for row in vertices.tolist():
+                f.write((' '.join(repr(v) for v in row) + '\n').encode())
+            for a, b, c in mesh.faces.tolist():
+                f.write(f'3 {a} {b} {c}\n'.encode())
+    out = tmp_path / 'out'
+    code, _, stderr = cli(['solve', path, '--smooth', '1e-2', '--signal',
+                           'quality', '--out', out, '--quiet'], capsys)
+    assert code == 0, stderr
+    written = _read_binary_ply(str(out / 'result.ply'))
+    assert list(written) == ['x', 'y', 'z', 'red', 'green', 'blue', 'nx',
+                             'ny', 'nz', 'quality', 'signal', 'result']
+    for name, kind in fields[3:]:  # equal, and in their own types
+        assert written[name].dtype == np.dtype(kind), name
+        assert np.array_equal(written[name], vertices[name]), name
+    assert np.array_equal(written['signal'], quality)
+    # trimesh reads the colours as colours
+    loaded = trimesh.load(out / 'result.ply', process=False)
+    assert np.array_equal(loaded.visual.vertex_colors[:, :3], rgb)
+    with open(out / 'report.json') as f:
+        report = json.load(f)
+    assert report['input_properties'] == ['red', 'green', 'blue', 'nx', 'ny',
+                                          'nz', 'quality']
+    # fairing moves the vertices: their old normals are left out; a
+    # property named like a new one is replaced by it
+    code, _, stderr = cli(['solve', out / 'result.ply', '--smooth', '1e-2',
+                           '--out', tmp_path / 'fair', '--quiet'], capsys)
+    assert code == 0, stderr
+    faired = _read_binary_ply(str(tmp_path / 'fair' / 'result.ply'))
+    assert list(faired) == ['x', 'y', 'z', 'red', 'green', 'blue',
+                            'quality'] + [f'{key}_{k}' for key in
+                                          ('signal', 'result')
+                                          for k in range(3)]
+    assert np.array_equal(faired['quality'], quality)
+
+
+def _degenerate_obj(tmp_path, pos, face):
+    """The sphere with its first triangle flattened: one corner moved to
+    the middle of the opposite edge (zero area, three distinct
+    corners)."""
+    flat = pos.copy()
+    a, b, c = face[0]
+    flat[c] = (flat[a] + flat[b]) / 2
+    path = tmp_path / 'flat.obj'
+    path.write_text(
+        ''.join(f'v {x!r} {y!r} {z!r}\n' for x, y, z in flat.tolist())
+        + ''.join(f'f {a} {b} {c}\n' for a, b, c in (face + 1).tolist()))
+    return path
+
+
+def test_a_zero_area_triangle_names_the_file_and_the_option(files, tmp_path,
+                                                             capsys):
+    # was: "'face' has 1 zero-area (degenerate) triangle(s) (first: [0]);
+    # remove them, e.g. with trimesh's ...", after the hierarchy was built
+    _, pos, face, _, _ = files
+    path = _degenerate_obj(tmp_path, pos, face)
+    for problem in (['--smooth', '1e-2'], ['--conformal-flow', '1e-3']):
+        code, _, stderr = cli(['solve', path, '--out', tmp_path / 'out',
+                               '--quiet'] + problem, capsys)
+        assert_user_error(code, stderr, 'solve', f"'{path}' has 1 zero-area "
+                          f"triangle(s)", "first: triangle 0",
+                          f"from line {len(pos) + 1}: 'f {face[0][0] + 1} ",
+                          'give --robust-laplacian', 'delete these faces')
+    # the option it names works
+    out = tmp_path / 'robust'
+    code, _, stderr = cli(['solve', path, '--smooth', '1e-2', '--out', out,
+                           '--quiet', '--robust-laplacian'], capsys)
+    assert code == 0, stderr
+    with open(out / 'report.json') as f:
+        assert json.load(f)['laplacian'] == 'robust (--robust-laplacian)'
+    assert np.isfinite(read_surface(str(out / 'result.ply'))[0]).all()
+
+
+def test_the_robust_laplacian_option_is_the_library_robust_laplacian(
+        files, tmp_path, capsys):
+    # a flattened ellipsoid: obtuse triangles, where the robust (intrinsic
+    # Delaunay) Laplacian differs from the cotan Laplacian
+    _, pos, face, signal, _ = files
+    pos = pos * [3, 1, 0.3]
+    path = tmp_path / 'ellipsoid.ply'
+    write_ply(str(path), pos, face)
+    np.save(tmp_path / 'y.npy', signal)
+    results = {}
+    for option in ([], ['--robust-laplacian']):
+        out = tmp_path / f'out{len(option)}'
+        code, _, stderr = cli(['solve', path, '--smooth', '1e-2', '--signal',
+                               tmp_path / 'y.npy', '--out', out, '--quiet',
+                               '--tol', '1e-12'] + option, capsys)
+        assert code == 0, stderr
+        _, _, props = read_surface(str(out / 'result.ply'))
+        results[bool(option)] = np.stack([props['result_0'],
+                                          props['result_1']], 1)
+        with open(out / 'report.json') as f:
+            assert json.load(f)['laplacian'] == (
+                'robust (--robust-laplacian)' if option else 'cotan')
+    for robust in (False, True):
+        direct = smooth(mesh_data(pos, face), 1e-2,
+                        y=torch.from_numpy(signal), robust=robust,
+                        tol=1e-12).numpy()
+        assert np.abs(results[robust] - direct).max() < 1e-9
+    assert np.abs(results[True] - results[False]).max() > 1e-3
+
+
+def test_a_signal_that_is_a_folder_is_said_to_be_one(files, tmp_path,
+                                                     capsys):
+    # was: "signal file '...' does not exist"
+    paths = files[0]
+    for name in ('values', 'values.npy'):
+        (tmp_path / name).mkdir()
+        code, _, stderr = cli(['solve', paths['obj'], '--smooth', '1',
+                               '--signal', tmp_path / name, '--out',
+                               tmp_path / 'out', '--quiet'], capsys)
+        assert_user_error(code, stderr, 'solve', f"'{tmp_path / name}' is a "
+                          f"folder; give a .npy/.txt/.csv file with one row "
+                          f"per vertex, or FILE.ply:NAME")
+        assert 'does not exist' not in stderr
+
+
+def _unreadable():
+    """Whether /proc/self/mem opens but fails to read at offset 0 (EIO),
+    as on Linux."""
+    try:
+        with open('/proc/self/mem', 'rb') as f:
+            f.read(1)
+    except OSError as error:
+        return error.errno == errno.EIO
+    return False
+
+
+@pytest.mark.skipif(not _unreadable(), reason='needs /proc/self/mem that '
+                    'fails to read (Linux)')
+def test_a_file_that_cannot_be_read_is_one_line_without_errno(
+        files, tmp_path, capsys):
+    # /proc/self/mem opens but cannot be read (EIO): the bare
+    # "OSError: [Errno 5] Input/output error" was the message
+    paths = files[0]
+    os.symlink('/proc/self/mem', tmp_path / 'mesh.obj')
+    os.symlink('/proc/self/mem', tmp_path / 'signal.npy')
+    for argv, what in (([tmp_path / 'mesh.obj'], f"'{tmp_path / 'mesh.obj'}'"),
+                       ([paths['obj'], '--signal', tmp_path / 'signal.npy'],
+                        f"signal file '{tmp_path / 'signal.npy'}'")):
+        code, _, stderr = cli(['solve'] + argv + [
+            '--smooth', '1', '--out', tmp_path / 'out', '--quiet'], capsys)
+        assert_user_error(code, stderr, 'solve',
+                          f"{what} cannot be read: input/output error")
+        assert 'Errno' not in stderr
+
+
+@pytest.mark.parametrize('path, message', [
+    ('/proc/nope', "'/proc/nope' does not exist"),
+    ('/proc/nope.obj', "'/proc/nope.obj' does not exist"),
+    ('LINK', "does not exist (it is a link to"),
+    ('INSIDE_A_FILE', "is a file, not a folder)"),
+])
+def test_a_path_that_is_no_file_is_one_line(files, tmp_path, capsys, path,
+                                            message):
+    if path == 'LINK':
+        path = tmp_path / 'link.obj'
+        os.symlink(tmp_path / 'gone.obj', path)
+    elif path == 'INSIDE_A_FILE':
+        path = os.path.join(files[0]['obj'], 'mesh.obj')
+    code, _, stderr = cli(['solve', path, '--smooth', '1', '--out',
+                           tmp_path / 'out', '--quiet'], capsys)
+    assert_user_error(code, stderr, 'solve', message)

@@ -200,3 +200,13 @@ def test_unit_votes_and_no_votes():
     assert scores_to_labels(scores).tolist() == [1, 3, -1]
     # a tie goes to the smaller label
     assert scores_to_labels(label_scores([0, 0], [2, 1], 1)).tolist() == [1]
+
+
+def test_label_files_with_a_utf8_byte_order_mark(tmp_path):
+    # Notepad saves UTF-8 with a BOM (issue 40)
+    (tmp_path / 'a.seg').write_text('2\n0\n1\n', encoding='utf-8-sig')
+    (tmp_path / 'a.seseg').write_text('0.5 0.5\n1 0\n',
+                                      encoding='utf-8-sig')
+    assert read_labels(str(tmp_path / 'a.seg')).tolist() == [2, 0, 1]
+    assert read_soft_labels(str(tmp_path / 'a.seseg')).tolist() == [
+        [0.5, 0.5], [1, 0]]

@@ -1,7 +1,9 @@
 """Meshes on disk: the OFF parser (ModelNet's malformed headers, COFF,
 polygons), the trimesh-backed OBJ/PLY/STL reader, the binary PLY writer,
 per-vertex signals, and the errors that name the file and the problem."""
+import errno
 import os
+import warnings
 
 import numpy as np
 import pytest
@@ -379,3 +381,336 @@ def test_a_signal_that_is_not_npy_is_named(tmp_path):
                                          r".npy file") as error:
         mf.read_signal(str(tmp_path / 'signal.npy'), 4)
     assert 'pickle' not in str(error.value)
+
+
+# --- UTF-8 byte-order marks (issue 40) --------------------------------------
+
+
+def _text_files():
+    """The icosphere as the text formats store it: ``{ext: text}``, the
+    OBJ beginning with a vertex line (no comment before it)."""
+    V, F = icosphere()
+    mesh = trimesh.Trimesh(V, F, process=False)
+    obj = ''.join(f'v {x!r} {y!r} {z!r}\n' for x, y, z in V.tolist()) + \
+        ''.join(f'f {a + 1} {b + 1} {c + 1}\n' for a, b, c in F.tolist())
+    return {
+        'obj': obj,
+        'off': trimesh.exchange.off.export_off(mesh),
+        'ply': trimesh.exchange.ply.export_ply(
+            mesh, encoding='ascii').decode('ascii'),
+        'stl': trimesh.exchange.stl.export_stl_ascii(mesh),
+    }
+
+
+@pytest.mark.parametrize('ext', ['obj', 'off', 'ply', 'stl'])
+def test_a_utf8_byte_order_mark_is_ignored(tmp_path, ext):
+    # Notepad saves UTF-8 with a BOM: '\ufeffv 0 0 0' lost the first
+    # vertex of an OBJ file (IndexError: index 161 is out of bounds)
+    text = _text_files()[ext]
+    plain, marked = tmp_path / f'plain.{ext}', tmp_path / f'marked.{ext}'
+    plain.write_text(text, encoding='utf-8')
+    marked.write_text(text, encoding='utf-8-sig')
+    assert marked.read_bytes()[:3] == b'\xef\xbb\xbf'
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore')  # the STL soup is welded
+        want = mf.read_surface(str(plain), return_inverse=True)
+        got = mf.read_surface(str(marked), return_inverse=True)
+    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1],
+                                                              want[1])
+    assert got[2].keys() == want[2].keys()
+    assert np.array_equal(got[3], want[3])
+    assert len(got[0]) == 42 and got[1].shape == (80, 3)
+
+
+def test_a_byte_order_mark_is_ignored_in_face_line_messages(tmp_path):
+    # the line named for a bad face counts the first line as line 1
+    path = tmp_path / 'a.obj'
+    path.write_text(REPEATED_VERTEX[0][1], encoding='utf-8-sig')
+    with pytest.raises(ValueError, match=REPEATED_VERTEX[0][2]):
+        mf.read_mesh(str(path))
+
+
+def test_texture_coordinates_of_an_obj_with_a_byte_order_mark(tmp_path):
+    V, F = icosphere()
+    uv = (V[:, :2] + 1) / 2
+    text = ''.join(f'v {x!r} {y!r} {z!r}\n' for x, y, z in V.tolist()) + \
+        ''.join(f'vt {u!r} {v!r}\n' for u, v in uv.tolist()) + \
+        ''.join(f'f {a}/{a} {b}/{b} {c}/{c}\n'
+                for a, b, c in (F + 1).tolist())
+    (tmp_path / 'plain.obj').write_text(text, encoding='utf-8')
+    (tmp_path / 'marked.obj').write_text(text, encoding='utf-8-sig')
+    got = []
+    for name in ('plain.obj', 'marked.obj'):
+        pos, face, _ = mf.read_surface(str(tmp_path / name))
+        got.append(mf.read_face_uv(str(tmp_path / name), pos, face))
+    assert got[0] is not None and np.array_equal(got[0], got[1])
+    assert np.allclose(got[1], uv[F].transpose(1, 0, 2))
+
+
+def test_a_binary_stl_header_is_not_taken_for_a_byte_order_mark(tmp_path):
+    V, F = icosphere()
+    data = bytearray(trimesh.exchange.stl.export_stl(
+        trimesh.Trimesh(V, F, process=False)))
+    data[:3] = b'\xef\xbb\xbf'  # the 80-byte header may hold anything
+    (tmp_path / 'b.stl').write_bytes(bytes(data))
+    with pytest.warns(UserWarning, match='welded 198 vertices'):
+        pos, face = mf.read_mesh(str(tmp_path / 'b.stl'))
+    assert len(pos) == 42 and face.shape == (80, 3)
+
+
+def test_signals_in_text_files_with_a_byte_order_mark(tmp_path):
+    one = np.arange(4.0)
+    (tmp_path / 's.txt').write_text('\n'.join(map(str, one)) + '\n',
+                                    encoding='utf-8-sig')
+    (tmp_path / 's.csv').write_text('0,1\n2,3\n4,5\n6,7\n',
+                                    encoding='utf-8-sig')
+    assert np.array_equal(mf.read_signal(str(tmp_path / 's.txt'), 4), one)
+    assert np.array_equal(mf.read_signal(str(tmp_path / 's.csv'), 4),
+                          np.arange(8.0).reshape(4, 2))
+
+
+# --- OBJ files: the vertices as stored (issue 40) ---------------------------
+
+
+def _two_spheres_obj(normals=True):
+    """Two disjoint icospheres in one OBJ file, as exporters write them:
+    an object each (``o``), a material each (``usemtl``), with vertex
+    normals; 2 x 42 vertices, 2 x 80 triangles."""
+    V, F = icosphere()
+    lines, base = [], 0
+    for name, shift in (('first', 0.0), ('second', 5.0)):
+        lines += [f'o {name}']
+        lines += [f'v {x + shift!r} {y!r} {z!r}' for x, y, z in V.tolist()]
+        if normals:
+            lines += [f'vn {x!r} {y!r} {z!r}' for x, y, z in V.tolist()]
+        lines += [f'usemtl material_{name}', 's 1']
+        lines += [' '.join(['f'] + [f'{i}//{i}' if normals else f'{i}'
+                                    for i in (face + base + 1).tolist()])
+                  for face in F]
+        base += len(V)
+    both = np.concatenate([V, V + [5.0, 0, 0]])
+    return '\n'.join(lines) + '\n', both, np.concatenate([F, F + len(V)])
+
+
+@pytest.mark.parametrize('normals', [True, False])
+def test_a_two_object_obj_is_not_welded(tmp_path, normals):
+    # trimesh gave every object all the file's vertices (848 -> 84): the
+    # false warning "welded N vertices" for a file without duplicates
+    text, V, F = _two_spheres_obj(normals)
+    path = tmp_path / 'two.obj'
+    path.write_text(text)
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')  # no warning at all
+        pos, face, _, inverse = mf.read_surface(str(path),
+                                                return_inverse=True)
+    assert np.array_equal(pos, V) and np.array_equal(face, F)
+    assert np.array_equal(inverse, np.arange(len(V)))
+
+
+@pytest.mark.parametrize('objects', [False, True])
+def test_the_weld_warning_counts_the_merged_vertices(tmp_path, objects):
+    # an icosphere stored in two halves, each with its own copies of the
+    # vertices on the seam (as one object, or as two with a material
+    # each, as exporters split a mesh into parts): the seam's vertices
+    # are merged, and only they are counted
+    V, F = icosphere()
+    lines, base, stored = [], 0, []
+    for k, half in enumerate((F[:40], F[40:])):
+        used = np.unique(half)
+        index = np.full(len(V), -1)
+        index[used] = np.arange(len(used)) + base
+        if objects:
+            lines += [f'o part{k}', f'usemtl material{k}']
+        lines += [f'v {x!r} {y!r} {z!r}' for x, y, z in V[used].tolist()]
+        lines += [f'f {a} {b} {c}' for a, b, c in (index[half] + 1).tolist()]
+        base += len(used)
+        stored.append(used)
+    seam = len(np.intersect1d(*stored))
+    assert 0 < seam < len(V) and base == len(V) + seam
+    path = tmp_path / 'halves.obj'
+    path.write_text('\n'.join(lines) + '\n')
+    with pytest.warns(UserWarning) as record:
+        pos, face, _, inverse = mf.read_surface(str(path),
+                                                return_inverse=True)
+    messages = [str(w.message) for w in record]
+    assert messages == [
+        f"'{path}': welded {seam} vertices at the same position as another "
+        f"({len(V) + seam} -> {len(V)}), which connects its triangles into "
+        f"one surface"]
+    assert len(pos) == len(V) and np.array_equal(pos[face], V[F])
+    assert np.array_equal(pos[inverse], V[np.concatenate(stored)])
+
+
+def test_obj_faces_every_way_they_are_written(tmp_path):
+    square = 'v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0 1 0 0\n'
+    cases = [
+        # a quad and a triangle: fans
+        (square + 'f 1 2 3 4\nf 2 5 3\n', [[0, 1, 2], [0, 2, 3], [1, 4, 2]]),
+        # texture and normal indices, tabs, comments, indentation
+        (square + 'vt 0 0\nvn 0 0 1\nf 1/1/1 2/1/1 3//1 # one\n'
+         '  f\t3/1\t4/1\t1/1\n', [[0, 1, 2], [2, 3, 0]]),
+        # negative indices count back from the last vertex defined
+        ('v 0 0 0\nv 1 0 0\nv 1 1 0\nf -3 -2 -1\nv 0 1 0\nf -4 -2 -1\n',
+         [[0, 1, 2], [0, 2, 3]]),
+        # a line continued with a backslash, Windows line ends
+        ('v 0 0 0\r\nv 1 0 \\\r\n 0\r\nv 1 1 0\r\nf 1 \\\r\n2 3\r\n',
+         [[0, 1, 2]]),
+    ]
+    for k, (text, faces) in enumerate(cases):
+        path = tmp_path / f'{k}.obj'
+        path.write_text(text, newline='')
+        assert mf.read_obj(str(path))[1].tolist() == faces, text
+    pos, _ = mf.read_obj(str(tmp_path / '0.obj'))
+    assert pos[4].tolist() == [2, 0, 0]  # colours after x y z ignored
+
+
+@pytest.mark.parametrize('text,problem', [
+    ('v 0 0 0\nv 1 0\nv 0 1 0\n', "malformed vertex line 2: 'v 1 0'"),
+    ('v 0 0 0\nv 1 x 0\nv 0 1 0\n', "malformed vertex line 2: 'v 1 x 0'"),
+    ('v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\n',
+     "malformed face line 5: 'f 1 2'"),
+    ('v 0 0 0\nv 1 0 0\nv 0 1 0\n# c\nf 0 1 2\n',
+     "malformed face line 5: 'f 0 1 2'"),
+    ('v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3.5\n',
+     "malformed face line 4: 'f 1 2 3.5'"),
+])
+def test_a_malformed_obj_line_is_named(tmp_path, text, problem):
+    path = tmp_path / 'bad.obj'
+    path.write_text(text)
+    with pytest.raises(ValueError) as info:
+        mf.read_surface(str(path))
+    assert "bad.obj'" in str(info.value) and problem in str(info.value)
+
+
+# --- files that cannot be read (issue 40) -----------------------------------
+
+
+def test_what_is_wrong_with_a_path_is_said_on_one_line(tmp_path):
+    (tmp_path / 'm.obj').write_text(TET_OBJ + 'f 1 2 3\n')
+    (tmp_path / 'folder.obj').mkdir()
+    os.symlink(tmp_path / 'gone.obj', tmp_path / 'link.obj')
+    cases = [
+        (tmp_path / 'folder.obj', ValueError, r"folder\.obj' is a folder; "
+         r"give a mesh or point cloud file \(\.obj/\.off/\.ply/\.stl\)$"),
+        (tmp_path / 'link.obj', FileNotFoundError, r"link\.obj' does not "
+         r"exist \(it is a link to '.*gone\.obj', which does not exist\)$"),
+        (tmp_path / 'm.obj' / 'x.obj', FileNotFoundError, r"x\.obj' does "
+         r"not exist \('.*m\.obj' is a file, not a folder\)$"),
+    ]
+    for path, kind, match in cases:
+        with pytest.raises(kind, match=match):
+            mf.read_surface(str(path))
+
+
+def _unreadable():
+    """Whether /proc/self/mem opens but fails to read at offset 0 (EIO),
+    as on Linux."""
+    try:
+        with open('/proc/self/mem', 'rb') as f:
+            f.read(1)
+    except OSError as error:
+        return error.errno == errno.EIO
+    return False
+
+
+@pytest.mark.skipif(not _unreadable(), reason='needs /proc/self/mem that '
+                    'fails to read (Linux)')
+def test_a_file_that_fails_to_read_is_named_without_an_errno(tmp_path):
+    # /proc/self/mem opens but fails to read at offset 0 (EIO): the bare
+    # "[Errno 5] Input/output error" was the message
+    for ext in ('obj', 'off', 'ply', 'stl'):
+        os.symlink('/proc/self/mem', tmp_path / f'mem.{ext}')
+        with pytest.raises(ValueError) as info:
+            mf.read_surface(str(tmp_path / f'mem.{ext}'))
+        assert str(info.value) == \
+            f"'{tmp_path / f'mem.{ext}'}' cannot be read: input/output error"
+    for ext in ('npy', 'txt'):
+        os.symlink('/proc/self/mem', tmp_path / f's.{ext}')
+        with pytest.raises(ValueError, match=r"^signal file '.*s\.(npy|txt)'"
+                           r" cannot be read: input/output error$"):
+            mf.read_signal(str(tmp_path / f's.{ext}'), 4)
+
+
+def test_a_file_that_may_not_be_read_is_named(tmp_path, monkeypatch):
+    # (root reads every file, so the refusal is simulated)
+    path = tmp_path / 'm.obj'
+    path.write_text(TET_OBJ + 'f 1 2 3\n')
+
+    def refuse(*args, **kwargs):
+        raise PermissionError(13, 'Permission denied', str(path))
+
+    monkeypatch.setattr(mf, 'open', refuse, raising=False)
+    with pytest.raises(PermissionError, match=r"^'.*m\.obj' cannot be read: "
+                                              r"permission denied$"):
+        mf.read_surface(str(path))
+
+
+def test_a_signal_folder_is_said_to_be_a_folder(tmp_path):
+    (tmp_path / 'values').mkdir()
+    (tmp_path / 'values.npy').mkdir()
+    with pytest.raises(ValueError, match=r"signal '.*values' is a folder; "
+                       r"give a \.npy/\.txt/\.csv file with one row per "
+                       r"vertex, or FILE\.ply:NAME$"):
+        mf.read_signal(str(tmp_path / 'values'), 4)
+    with pytest.raises(ValueError, match=r"signal file '.*values\.npy' is a "
+                                         r"folder; give"):
+        mf.read_signal(str(tmp_path / 'values.npy'), 4)
+    # a vertex property of that name is still the property
+    assert mf.read_signal(str(tmp_path / 'values'), 4, {
+        str(tmp_path / 'values'): np.ones(4)}).tolist() == [1, 1, 1, 1]
+
+
+# --- zero-area triangles (issue 40) -----------------------------------------
+
+
+def test_zero_area_triangles_are_named_with_their_line(tmp_path):
+    flat = TET_V.copy()
+    flat[3] = [0.5, 0.5, 0]  # on the line between vertices 1 and 2
+    path = tmp_path / 'flat.obj'
+    path.write_text(''.join(f'v {x} {y} {z}\n' for x, y, z in flat)
+                    + ''.join(f'f {a} {b} {c}\n' for a, b, c in TET_F + 1))
+    pos, face = mf.read_mesh(str(path))  # read: the policy allows them
+    with pytest.raises(ValueError, match=r"flat\.obj' has 1 zero-area "
+                       r"triangle\(s\) \(collinear corners; first: triangle "
+                       r"2, vertices \[1, 2, 3\] counted from 0, from line 7:"
+                       r" 'f 2 3 4'\), which the cotan Laplacian cannot "
+                       r"weigh; delete these faces"):
+        mf.check_triangle_areas(str(path), pos, face)
+    with pytest.raises(ValueError, match=r"weigh; do this$"):
+        mf.check_triangle_areas(str(path), pos, face, advice='do this')
+    mf.check_triangle_areas(str(path), TET_V, TET_F)  # none: no error
+
+
+# --- PLY properties in their own types (issue 40) --------------------------
+
+
+def test_write_ply_keeps_the_types_of_typed_properties(tmp_path):
+    V, F = icosphere()
+    n = len(V)
+    rng = np.random.default_rng(2)
+    typed = {'red': rng.integers(0, 256, n).astype(np.uint8),
+             'nx': rng.standard_normal(n).astype(np.float32),
+             'flag': rng.random(n) > 0.5,
+             'id': np.arange(n, dtype=np.int64),
+             'big': np.full(n, 2 ** 40, dtype=np.int64),
+             'pair': rng.integers(-5, 5, (n, 2)).astype(np.int16)}
+    path = tmp_path / 't.ply'
+    mf.write_ply(str(path), V, F, properties={'heat': rng.random(n)},
+                 typed_properties=typed)
+    header = path.read_bytes().split(b'end_header')[0].decode().splitlines()
+    assert [h for h in header if h.startswith('property ')][3:] == [
+        'property uchar red', 'property float nx', 'property uchar flag',
+        'property int id', 'property double big', 'property short pair_0',
+        'property short pair_1', 'property double heat',
+        'property list uchar int vertex_indices']
+    _, _, props = mf.read_surface(str(path))
+    for name in ('red', 'nx', 'id', 'big'):
+        assert np.array_equal(props[name], typed[name]), name
+    assert np.array_equal(props['flag'], typed['flag'])
+    assert np.array_equal(np.stack([props['pair_0'], props['pair_1']], 1),
+                          typed['pair'])
+    assert props['red'].dtype == np.uint8 and props['nx'].dtype == np.float32
+    with pytest.raises(ValueError, match="two vertex properties named "
+                                         "'red'"):
+        mf.write_ply(str(path), V, F, colors=np.zeros((n, 3)),
+                     typed_properties={'red': typed['red']})

@@ -161,3 +161,32 @@ def test_a_file_that_is_not_npy_is_named_without_pickle_advice(tmp_path):
                                          r"it is not a NumPy .npy file; "
                                          r"write it with numpy.save$"):
         read_points(str(path))
+
+
+@pytest.mark.parametrize('ext', ['txt', 'xyz', 'pts'])
+@pytest.mark.parametrize('sep', [' ', ','])
+def test_a_utf8_byte_order_mark_is_ignored(tmp_path, ext, sep):
+    # Notepad saves UTF-8 with a BOM: the first value read as
+    # '\ufeff0.5', "could not convert string to float64" (issue 40)
+    values = table(columns=7)
+    write_text(tmp_path / f'plain.{ext}', values, sep)
+    text = (tmp_path / f'plain.{ext}').read_text()
+    (tmp_path / f'marked.{ext}').write_text(text, encoding='utf-8-sig')
+    assert (tmp_path / f'marked.{ext}').read_bytes()[:3] == b'\xef\xbb\xbf'
+    want = read_points(str(tmp_path / f'plain.{ext}'))
+    got = read_points(str(tmp_path / f'marked.{ext}'))
+    for a, b in zip(got, want):
+        assert np.array_equal(a, b)
+    assert np.array_equal(got[0], values[:, :3])
+    # a comment first, then the numbers
+    (tmp_path / f'comment.{ext}').write_text('# x y z nx ny nz label\n'
+                                             + text, encoding='utf-8-sig')
+    assert np.array_equal(read_table(str(tmp_path / f'comment.{ext}')),
+                          values)
+
+
+def test_a_folder_is_said_to_be_a_folder(tmp_path):
+    (tmp_path / 'cloud.xyz').mkdir()
+    with pytest.raises(ValueError, match=r"cloud\.xyz' is a folder; give a "
+                                         r"file$"):
+        read_points(str(tmp_path / 'cloud.xyz'))

@@ -288,6 +288,41 @@ def test_not_converging_warns_or_raises():
     assert solver.info.converged and solver.info.reason is None
 
 
+def test_the_convergence_warning_words_its_settings_for_any_interface():
+    # the library names its arguments; an interface with other names for
+    # them (the command line: --max-cycles, --tol, --method) rewords the
+    # one text through `setting` instead of keeping a copy (issue 40)
+    import pickle
+    A, m, solver = case('closed')
+    with pytest.warns(ConvergenceWarning) as record:
+        solver.solve(A, m, tol=1e-12, max_iter=2)
+    warning = record[0].message
+    assert (warning.max_iter, warning.method, warning.tol) == (2, 'cycles',
+                                                                1e-12)
+    assert warning.residual == solver.info.residuals[-1]
+    assert warning.reason() == solver.info.reason
+    assert str(warning) == f'GravoMG.solve did not converge: ' \
+        f'{solver.info.reason}'
+    assert solver.info.reason.endswith(
+        "above tol=1e-12; raise max_iter, or use method='pcg'")
+
+    def option(name, value=None):
+        flag = {'max_iter': '-n', 'tol': '-t', 'method': '-m'}[name]
+        return flag if value is None else f'{flag} {value}'
+
+    assert warning.reason(option) == (
+        f'stopped at -n 2 cycles with relative residual '
+        f'{warning.residual:.3g} above -t 1e-12; raise -n, or use -m pcg')
+    copy = pickle.loads(pickle.dumps(warning))  # e.g. from a worker
+    assert str(copy) == str(warning) and copy.reason(option) == \
+        warning.reason(option)
+    with pytest.warns(ConvergenceWarning, match='max_iter=1 PCG iterations'
+                      r' with relative residual \S+ above tol=1e-12; raise '
+                      'max_iter$') as record:
+        solver.solve(A, m, tol=1e-12, max_iter=1, method='pcg')
+    assert record[0].message.reason(option).endswith('raise -n')
+
+
 DEVICES = ['cpu'] + (['cuda'] if torch.cuda.is_available() else [])
 
 

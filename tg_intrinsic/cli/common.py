@@ -11,6 +11,8 @@ from typing import Iterable, Optional
 
 from tqdm.auto import tqdm
 
+from tg_intrinsic.utils import os_error_reason
+
 
 class UsageError(ValueError):
     """A mistake in what the user asked for (a missing file, a bad value):
@@ -40,7 +42,7 @@ def user_message(error: BaseException) -> str:
             else 'a file'
         if error.filename2 is not None:
             where += f" -> '{error.filename2}'"
-        return one_line(f"{where}: {error.strerror.lower()}")
+        return one_line(f"{where}: {os_error_reason(error)}")
     return one_line(error)
 
 

@@ -3,15 +3,18 @@ optional bi-Laplacian term beta S M^-1 S, or solves the screened Poisson
 problem (S + eta M) x = M y, or runs the conformalized mean curvature
 flow (M_t + h S_0) p_t+1 = M_t p_t of a mesh, with Gravo MG; S is the cotan
 Laplacian of a manifold mesh, else the robust Laplacian (point clouds,
-non-manifold meshes), M the lumped masses. Without --signal, --smooth
-smooths the vertex positions (implicit fairing).
+non-manifold meshes, --robust-laplacian), M the lumped masses. Without
+--signal, --smooth smooths the vertex positions (implicit fairing).
 
 Writes to --out: result.ply (the surface, with the input signal and the
 result as vertex properties 'signal' and 'result', or 'signal_0..' and
-'result_0..' for several channels; after fairing or the flow the
-positions are the new ones), result.png (the result drawn on the surface) and
-report.json (the problem, the Laplacian, the hierarchy, the residual of
-every cycle and the timings)."""
+'result_0..' for several channels, beside the vertex properties of a PLY
+input in their own types: colours, normals, ...; the new ones replace
+the input's 'signal*' and 'result*', e.g. of an earlier run. After
+fairing or the flow the positions are the new ones, and the input's
+normals, which no longer fit them, are left out), result.png (the result
+drawn on the surface) and report.json (the problem, the Laplacian, the
+hierarchy, the residual of every cycle and the timings)."""
 import os
 import time
 import warnings
@@ -106,6 +109,12 @@ def add_arguments(parser):
                         help='hierarchy: smallest level size; surfaces with '
                         'fewer points are solved directly (default: '
                         '%(default)s)')
+    parser.add_argument('--robust-laplacian', action='store_true',
+                        help='use the robust Laplacian (Sharp and Crane '
+                        '2020) for a manifold mesh too, instead of the cotan '
+                        'Laplacian: it accepts zero-area and very thin '
+                        'triangles (point clouds and non-manifold meshes '
+                        'always use it)')
 
 
 def _problem(args):
@@ -138,10 +147,10 @@ def run(args):
 
     from tg_intrinsic.io import read_signal, read_surface, write_ply
     from tg_intrinsic.io.figures import draw_surface
-    from tg_intrinsic.io.mesh import SIGNAL_EXTENSIONS
+    from tg_intrinsic.io.mesh import SIGNAL_EXTENSIONS, check_triangle_areas
     from tg_intrinsic.io.results import claim_folder, result_folder
-    from tg_intrinsic.solvers import (GravoMG, conformal_flow, poisson,
-                                      smooth)
+    from tg_intrinsic.solvers import (ConvergenceWarning, GravoMG,
+                                      conformal_flow, poisson, smooth)
     from tg_intrinsic.solvers.systems import (combined_info,
                                               uses_robust_laplacian)
     from tg_intrinsic.transforms import GravoHierarchy
@@ -180,22 +189,28 @@ def run(args):
         pos, face, properties, inverse = read_surface(args.mesh,
                                                       return_inverse=True)
         n = len(pos)
+        data = Data(pos=torch.from_numpy(pos))
+        if face is not None:
+            data.face = torch.from_numpy(face).t().contiguous()
+        if face is None:
+            laplacian = 'robust (point cloud)'
+        elif uses_robust_laplacian(data):
+            laplacian = 'robust (non-manifold mesh)'
+        elif args.robust_laplacian:
+            laplacian = 'robust (--robust-laplacian)'
+        else:
+            laplacian = 'cotan'
+            check_triangle_areas(args.mesh, pos, face, advice=(
+                "give --robust-laplacian (the robust Laplacian accepts "
+                "them), or delete these faces from the file, e.g. with "
+                "trimesh: m = trimesh.load(path, process=False); "
+                "m.update_faces(m.nondegenerate_faces()); m.export(path)"))
         y = pos.copy() if args.signal is None else \
             read_signal(args.signal, n, properties, inverse)
     if args.conformal_flow is not None and face is None:
         raise UsageError(f"--conformal-flow needs a triangle mesh, but "
                          f"{args.mesh} is a point cloud (no faces)")
     name, equation, parameters, title = _problem(args)
-    data = Data(pos=torch.from_numpy(pos))
-    if face is not None:
-        data.face = torch.from_numpy(face).t().contiguous()
-    robust = uses_robust_laplacian(data)
-    if face is None:
-        laplacian = 'robust (point cloud)'
-    elif robust:
-        laplacian = 'robust (non-manifold mesh)'
-    else:
-        laplacian = 'cotan'
 
     with stage(f"building the hierarchy of {n} points", quiet, times,
                 'hierarchy'):
@@ -211,7 +226,8 @@ def run(args):
             smooth if args.conformal_flow is None else conformal_flow,
             'method')
         options = dict(solver=solver, tol=args.tol, cycle=args.cycle,
-                       max_iter=args.max_cycles, method=method)
+                       max_iter=args.max_cycles, method=method,
+                       robust=True if args.robust_laplacian else None)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter('always')
             try:
@@ -230,8 +246,13 @@ def run(args):
             except ValueError as error:
                 raise UsageError(_with_option_names(str(error))) from error
         for warning in caught:  # in the command line's words
-            warnings.warn(_with_option_names(str(warning.message)),
-                          warning.category)
+            message = warning.message
+            if isinstance(message, ConvergenceWarning):
+                text = (f"the solve did not converge: "
+                        f"{message.reason(_option_setting)}")
+            else:
+                text = _with_option_names(str(message))
+            warnings.warn(text, warning.category)
         x = x.numpy()
     info = solver.info
     times['setup'] = info.setup_time
@@ -241,14 +262,16 @@ def run(args):
                             - info.solve_time, 0.0)
 
     fairing = args.signal is None
+    new = {'signal': y, 'result': x}
+    kept = _kept_properties(properties, new, moved=fairing)
     ply_path = os.path.join(out, 'result.ply')
     png_path = os.path.join(out, 'result.png')
     with result_folder(out, 'solve', args.overwrite, inputs) as staging:
         with stage('writing result.ply and result.png', quiet, times,
                    'write'):
             write_ply(os.path.join(staging, 'result.ply'),
-                      x if fairing else pos, face,
-                      properties={'signal': y, 'result': x})
+                      x if fairing else pos, face, properties=new,
+                      typed_properties=kept)
             values, label, what = _drawn_values(x, y, fairing, args.signal)
             draw_surface(os.path.join(staging, 'result.png'),
                          x if fairing else pos,
@@ -266,9 +289,9 @@ def run(args):
             'signal': args.signal or 'vertex positions',
             'channels': channels,
             # named as write_ply names them
-            'ply_properties': ['signal', 'result'] if channels == 1 else
-            [f'{key}_{k}' for key in ('signal', 'result')
-             for k in range(channels)],
+            'ply_properties': _column_names(new),
+            # the input's vertex properties, kept in result.ply
+            'input_properties': _column_names(kept),
             'hierarchy': {'ratio': args.ratio,
                           'lower_bound': args.lower_bound,
                           'graph': 'mesh edges' if face is not None else
@@ -295,6 +318,46 @@ def run(args):
 # the library's names of the weights, and the options that set them
 OPTION_OF = {"'alpha'": '--smooth', "'beta'": '--bilaplacian',
              "'eta'": '--poisson', "'step'": '--conformal-flow'}
+# the solver's arguments that a ConvergenceWarning names, and the options
+# that set them
+SETTING_OF = {'max_iter': '--max-cycles', 'tol': '--tol',
+              'method': '--method'}
+# vertex properties that describe the positions, not kept once they move
+NORMALS = ('nx', 'ny', 'nz')
+
+
+def _option_setting(name: str, value=None) -> str:
+    """A solver argument in the command line's words (the wording that
+    :meth:`ConvergenceWarning.reason` asks for): ``--max-cycles 5``."""
+    option = SETTING_OF[name]
+    if value is None:
+        return option
+    return f'{option} {value:g}' if isinstance(value, float) else \
+        f'{option} {value}'
+
+
+def _column_names(properties: dict) -> list:
+    """The PLY vertex properties that write_ply makes of ``properties``:
+    ``name``, or ``name_0`` to ``name_{C-1}`` for several columns."""
+    names = []
+    for name, values in properties.items():
+        columns = 1 if values.ndim == 1 else values.shape[1]
+        names += [name] if columns == 1 else \
+            [f'{name}_{k}' for k in range(columns)]
+    return names
+
+
+def _kept_properties(properties: dict, new: dict, moved: bool) -> dict:
+    """The input's vertex properties that result.ply keeps: all but those
+    the ``new`` ones replace (``NAME`` and its columns ``NAME_0``, ... for
+    every new ``NAME``, e.g. of an earlier result.ply) and, when the
+    positions ``moved``, the normals."""
+    import re
+    replaced = re.compile('|'.join(f'{re.escape(name)}(_[0-9]+)?'
+                                   for name in new))
+    return {name: values for name, values in properties.items()
+            if not replaced.fullmatch(name)
+            and not (moved and name in NORMALS)}
 
 
 def _with_option_names(message: str) -> str:

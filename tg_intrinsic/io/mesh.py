@@ -1,15 +1,19 @@
-"""Meshes and point clouds on disk: OBJ, OFF, PLY and STL in (trimesh, and
-a direct OFF parser for ModelNet's malformed headers), binary PLY with
-per-vertex properties out, per-vertex signals from ``.npy``, text or PLY
-properties."""
+"""Meshes and point clouds on disk: OBJ, OFF, PLY and STL in (direct OBJ
+and OFF parsers, the latter for ModelNet's malformed headers too; trimesh
+for PLY and STL), binary PLY with per-vertex properties out, per-vertex
+signals from ``.npy``, text or PLY properties. Every text format is read
+with or without a UTF-8 byte-order mark (Notepad writes one)."""
+import io
 import os
 import os.path as osp
+import re
+import stat
 import warnings
 from typing import Dict, Optional, Tuple
 
 import numpy as np
 
-from tg_intrinsic.utils import atomic_write
+from tg_intrinsic.utils import atomic_write, os_error_reason
 
 from .hdr import read_npy
 
@@ -17,6 +21,63 @@ MESH_EXTENSIONS = ('.obj', '.off', '.ply', '.stl')
 SIGNAL_EXTENSIONS = ('.npy', '.txt', '.csv')
 # PLY vertex properties that are the geometry itself, not a signal
 _GEOMETRY_PROPERTIES = ('x', 'y', 'z')
+# the UTF-8 byte-order mark some editors (Notepad) put before the text
+_BOM = b'\xef\xbb\xbf'
+# the encoding that reads UTF-8 text with or without a byte-order mark
+TEXT_ENCODING = 'utf-8-sig'
+
+
+def check_file(path: str, what: str = '', give: str = 'a file') -> str:
+    """Checks that ``path`` is a file that can be read (the first byte of
+    a regular file is read) and returns it; ``what`` (e.g. ``'signal
+    file'``) goes before the name in the messages, and ``give`` says what
+    to give instead of a folder. Raises, on one line that names the file
+    and what is wrong: :class:`FileNotFoundError` when it does not exist
+    (a broken link, or a part of the path that is a file, is said), a
+    :class:`ValueError` for a folder, :class:`PermissionError` when it may
+    not be read, and a :class:`ValueError` for any other failure to read
+    it (e.g. an input/output error)."""
+    path = os.fspath(path)
+    name = f"{what} '{path}'" if what else f"'{path}'"
+    try:
+        mode = os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        raise FileNotFoundError(f"{name} does not exist"
+                                f"{_why_missing(path)}") from None
+    except PermissionError:
+        raise PermissionError(f"{name} cannot be read: permission denied "
+                              f"(on a folder above it)") from None
+    except OSError as error:
+        raise ValueError(f"{name} cannot be read: "
+                         f"{os_error_reason(error)}") from None
+    if stat.S_ISDIR(mode):
+        raise ValueError(f"{name} is a folder; give {give}")
+    if not stat.S_ISREG(mode):  # a pipe: a byte read here would be lost
+        return path
+    try:
+        with open(path, 'rb') as f:
+            f.read(1)
+    except PermissionError:
+        raise PermissionError(f"{name} cannot be read: permission "
+                              f"denied") from None
+    except OSError as error:
+        raise ValueError(f"{name} cannot be read: "
+                         f"{os_error_reason(error)}") from None
+    return path
+
+
+def _why_missing(path: str) -> str:
+    """Why a path that does not exist is missing, to end a sentence (a
+    broken link, a part of the path that is a file), or ``''``."""
+    if osp.islink(path):
+        return f" (it is a link to '{os.readlink(path)}', which does not"\
+            f" exist)"
+    parent = osp.dirname(osp.abspath(path))
+    while not osp.exists(parent) and osp.dirname(parent) != parent:
+        parent = osp.dirname(parent)
+    if osp.exists(parent) and not osp.isdir(parent):
+        return f" ('{parent}' is a file, not a folder)"
+    return ''
 
 
 def read_mesh(path: str, weld: bool = True
@@ -43,31 +104,39 @@ def read_surface(path: str, weld: bool = True, return_inverse: bool = False
     other than ``x, y, z`` by name (``nx``, ``red``, ``quality``, ...;
     empty for other formats).
 
+    The vertices as stored are those of the file, in its order: every
+    ``v`` line of an OBJ file, whatever object, group or material it
+    belongs to (:func:`read_obj`), the vertex list of OFF and PLY files,
+    three corners per triangle of an STL file. A UTF-8 byte-order mark
+    before the text (OBJ, OFF, ASCII PLY and STL) is ignored.
+
     Every command reads surfaces by this one policy:
 
     - **welding**: the vertices of a mesh at exactly the same position are
       merged (STL files and many OBJ exporters store every triangle's
-      corners separately), with a warning that says how many; each
-      welded vertex keeps the properties of its first copy. Point clouds
-      are kept as they are. ``weld=False`` reads the vertices as stored.
-    - **refused**, with a :class:`ValueError` that names the file and the
-      problem: a file that cannot be read, fewer than 3 vertices, NaN or
-      infinite coordinates, faces that index outside the vertices, and
-      faces that repeat a vertex (e.g. the OBJ line ``f 1 1 2``, or a
-      triangle whose corners coincide, found by welding). Such a face has
-      no area; the message names the first one (its triangle index and,
-      for OBJ and OFF files, its line) and says how to remove it.
+      corners separately), with a warning that says how many stored
+      vertices were merged into another; each welded vertex keeps the
+      properties of its first copy. Point clouds are kept as they are.
+      ``weld=False`` reads the vertices as stored.
+    - **refused**, with an error that names the file and the problem: a
+      file that does not exist (:class:`FileNotFoundError`) or cannot be
+      read (:func:`check_file`), and, with a :class:`ValueError`, fewer
+      than 3 vertices, NaN or infinite coordinates, faces that index
+      outside the vertices, and faces that repeat a vertex (e.g. the OBJ
+      line ``f 1 1 2``, or a triangle whose corners coincide, found by
+      welding). Such a face has no area; the message names the first one
+      (its triangle index and, for OBJ and OFF files, its line) and says
+      how to remove it. Triangles of distinct but collinear corners
+      (zero area) are read; :func:`check_triangle_areas` refuses them
+      where the cotan Laplacian needs a positive area.
 
     With ``return_inverse=True`` a fourth value gives, for every vertex
     as stored, its index after welding (``[N_stored]``).
     """
     path = os.fspath(path)
-    if not osp.exists(path):
-        raise FileNotFoundError(f"'{path}' does not exist")
-    if osp.isdir(path):
-        raise ValueError(f"'{path}' is a folder; give a mesh or point cloud "
-                         f"file ({'/'.join(MESH_EXTENSIONS)})")
     ext = osp.splitext(path)[1].lower()
+    check_file(path, give=f"a mesh or point cloud file "
+               f"({'/'.join(MESH_EXTENSIONS)})")
     if ext not in MESH_EXTENSIONS:
         raise ValueError(f"'{path}': unknown format {ext or '(none)'!r}; "
                          f"use one of {'/'.join(MESH_EXTENSIONS)}")
@@ -75,11 +144,11 @@ def read_surface(path: str, weld: bool = True, return_inverse: bool = False
     try:
         if ext == '.off':
             pos, face = read_off(path)
+        elif ext == '.obj':
+            pos, face = read_obj(path)
         else:
             import trimesh
-            kwargs = dict(maintain_order=True, skip_materials=True) \
-                if ext == '.obj' else {}
-            loaded = trimesh.load(path, process=False, **kwargs)
+            loaded = _load_trimesh(path, ext)
             if isinstance(loaded, trimesh.Scene):
                 loaded = loaded.to_geometry() if len(loaded.geometry) else \
                     None
@@ -93,7 +162,10 @@ def read_surface(path: str, weld: bool = True, return_inverse: bool = False
                 properties = _ply_vertex_properties(loaded, len(pos))
                 _check_ply_counts(path, len(pos), 0 if face is None
                                   else len(face))
-    except (OSError, ValueError, IndexError, KeyError, TypeError,
+    except OSError as error:  # checked readable above, yet it failed
+        raise ValueError(f"could not read '{path}': "
+                         f"{os_error_reason(error)}") from error
+    except (ValueError, IndexError, KeyError, TypeError,
             AttributeError) as error:
         raise ValueError(f"could not read '{path}' as {ext[1:].upper()} (is "
                          f"it truncated, or of another format?): "
@@ -137,7 +209,7 @@ def read_face_uv(path: str, pos: np.ndarray, face: np.ndarray
     ext = osp.splitext(path)[1].lower()
     if ext not in ('.obj', '.ply'):
         return None
-    loaded = trimesh.load(path, process=False, **(
+    loaded = _load_trimesh(path, ext, **(
         dict(skip_materials=False) if ext == '.obj' else {}))
     if isinstance(loaded, trimesh.Scene):
         loaded = loaded.to_geometry() if len(loaded.geometry) else None
@@ -205,53 +277,91 @@ def _check_repeated_corners(path: str, ext: str, face: np.ndarray):
         return
     bad = np.flatnonzero(repeated)
     first = int(bad[0])
-    try:
-        line = _first_repeating_face_line(path, ext)
-    except Exception:  # only for the message: never hide the real error
-        line = None
-    where = '' if line is None else \
-        f", from line {line[0]}: {line[1][:60]!r}"
     raise ValueError(
         f"'{path}' has {bad.size} triangle(s) that repeat a vertex (first: "
         f"triangle {first}, vertices {face[first].tolist()} counted from "
-        f"0{where}); such a face has no area and the geometry code rejects "
-        f"it. Delete these faces from the file, or repair it, e.g. with "
-        f"trimesh: m = trimesh.load(path, process=False); "
-        f"m.update_faces(m.nondegenerate_faces()); m.export(path)")
+        f"0{_where(path, ext, first)}); such a face has no area and the "
+        f"geometry code rejects it. Delete these faces from the file, or "
+        f"repair it, e.g. with trimesh: m = trimesh.load(path, "
+        f"process=False); m.update_faces(m.nondegenerate_faces()); "
+        f"m.export(path)")
 
 
-def _first_repeating_face_line(path: str, ext: str
-                               ) -> Optional[Tuple[int, str]]:
-    """``(line number from 1, text)`` of the first OBJ or OFF face line
-    whose corners repeat a vertex, or :obj:`None`."""
-    with open(path, 'r', errors='replace') as f:
-        numbered = [(k + 1, raw.strip(), raw.split('#', 1)[0].split())
-                    for k, raw in enumerate(f)]
+def check_triangle_areas(path: str, pos: np.ndarray, face: np.ndarray,
+                         advice: Optional[str] = None):
+    """Refuses triangles of zero area, e.g. three distinct but collinear
+    corners, which the cotan Laplacian divides by: a :class:`ValueError`
+    that names the file, how many there are, the first (its index and,
+    for OBJ and OFF files, its line) and what to do: ``advice``, or else
+    how to delete them. A triangle counts as zero-area by the rule of the
+    geometry code: its area at most 16 float64 epsilons times its
+    longest squared edge. ``pos [N, 3]`` and ``face [F, 3]`` are what
+    :func:`read_surface` read from ``path``."""
+    face = np.asarray(face, dtype=np.int64).reshape(-1, 3)
+    p = np.asarray(pos, dtype=np.float64)[face]
+    edges = p[:, [1, 2, 0]] - p
+    area = 0.5 * np.linalg.norm(np.cross(edges[:, 0], -edges[:, 2]), axis=1)
+    scale = (edges ** 2).sum(-1).max(1)
+    tiny = np.finfo(np.float64)
+    bad = np.flatnonzero(area <= 16 * tiny.eps * np.maximum(scale,
+                                                            tiny.tiny))
+    if not bad.size:
+        return
+    first = int(bad[0])
+    ext = osp.splitext(path)[1].lower()
+    if advice is None:
+        advice = ("delete these faces from the file, e.g. with trimesh: m "
+                  "= trimesh.load(path, process=False); m.update_faces("
+                  "m.nondegenerate_faces()); m.export(path)")
+    raise ValueError(
+        f"'{path}' has {bad.size} zero-area triangle(s) (collinear "
+        f"corners; first: triangle {first}, vertices "
+        f"{face[first].tolist()} counted from 0{_where(path, ext, first)}),"
+        f" which the cotan Laplacian cannot weigh; {advice}")
+
+
+def _where(path: str, ext: str, triangle: int) -> str:
+    """``', from line N: TEXT'`` for the OBJ or OFF face line that made
+    ``triangle`` (polygons make several), for a message; else ``''``."""
+    try:
+        line = _triangle_line(path, ext, triangle)
+    except Exception:  # only for the message: never hide the real error
+        line = None
+    return '' if line is None else f", from line {line[0]}: {line[1]!r}"
+
+
+def _triangle_line(path: str, ext: str, triangle: int
+                   ) -> Optional[Tuple[int, str]]:
+    """``(line number from 1, text up to 60 characters)`` of the OBJ or
+    OFF face line that made ``triangle`` (counted as the readers count
+    them), or :obj:`None`."""
     if ext == '.obj':
-        vertices = 0
-        for number, text, tokens in numbered:
-            if not tokens:
-                continue
-            if tokens[0] == 'v':
-                vertices += 1
-            elif tokens[0] == 'f':
-                corners = [int(t.split('/')[0]) for t in tokens[1:]]
-                corners = [c - 1 if c > 0 else vertices + c for c in corners]
-                if len(set(corners)) < len(corners):
-                    return number, text
-        return None
-    if ext == '.off':
-        numbered = [item for item in numbered if item[2]]
-        rest = numbered[0][2]
-        rest = ' '.join(rest)[' '.join(rest).upper().index('OFF') + 3:]
+        number = int(_parse_obj(path, with_lines=True)[2][triangle])
+    elif ext == '.off':
+        number = None
+        with open(path, 'r', encoding=TEXT_ENCODING, errors='replace') as f:
+            numbered = [(k + 1, raw.split('#', 1)[0].split())
+                        for k, raw in enumerate(f)]
+        numbered = [item for item in numbered if item[1]]
+        rest = ' '.join(numbered[0][1])
+        rest = rest[rest.upper().index('OFF') + 3:]
         i = 1
         if not rest.split():
-            rest, i = ' '.join(numbered[1][2]), 2
+            rest, i = ' '.join(numbered[1][1]), 2
         nv, nf = (int(v) for v in rest.split()[:2])
-        for number, text, tokens in numbered[i + nv:i + nv + nf]:
-            corners = tokens[1:int(tokens[0]) + 1]
-            if len(set(int(c) for c in corners)) < len(corners):
-                return number, text
+        for k, tokens in numbered[i + nv:i + nv + nf]:
+            triangle -= int(tokens[0]) - 2
+            if triangle < 0:
+                number = k
+                break
+        if number is None:
+            return None
+    else:
+        return None
+    with open(path, 'r', encoding=TEXT_ENCODING, errors='replace') as f:
+        for k, raw in enumerate(f, 1):
+            if k == number:
+                return number, raw.strip()[:60]
     return None
 
 
@@ -304,11 +414,167 @@ def _ply_vertex_properties(loaded, num_vertices: int
     return out
 
 
+def _load_trimesh(path: str, ext: str, **kwargs):
+    """``trimesh.load(path, process=False, **kwargs)``, without the UTF-8
+    byte-order mark that trimesh would read as text (a binary STL, whose
+    80-byte header may begin with any bytes, is left as it is)."""
+    import trimesh
+    with open(path, 'rb') as f:
+        head = f.read(84)
+    size = os.path.getsize(path)
+    binary_stl = ext == '.stl' and len(head) == 84 and size == \
+        84 + 50 * int.from_bytes(head[80:84], 'little')
+    if not head.startswith(_BOM) or binary_stl:
+        return trimesh.load(path, process=False, **kwargs)
+    with open(path, 'rb') as f:
+        data = f.read()[len(_BOM):]
+    return trimesh.load(io.BytesIO(data), file_type=ext[1:], process=False,
+                        resolver=trimesh.resolvers.FilePathResolver(path),
+                        **kwargs)
+
+
+def read_obj(path: str) -> Tuple[np.ndarray, Optional[np.ndarray]]:
+    """Reads the vertices and faces of an OBJ file as stored: ``(pos
+    [N, 3] float64, face [F, 3] int64)``, ``face`` :obj:`None` when the
+    file has no ``f`` lines (a point cloud). Every ``v`` line is one
+    vertex, in file order, whatever object, group or material it belongs
+    to (``o``, ``g``, ``usemtl``; colours after ``x y z`` are ignored).
+    ``f`` lines give polygons (corners ``v``, ``v/vt``, ``v//vn`` or
+    ``v/vt/vn``, counted from 1, negative ones back from the last vertex
+    defined), split into triangle fans. Texture coordinates, normals,
+    lines and the rest are not read; a UTF-8 byte-order mark, ``#``
+    comments and ``\\`` line continuations are allowed.
+
+    Raises a :class:`ValueError` that names the line of a malformed
+    ``v`` or ``f`` line."""
+    return _parse_obj(path)[:2]
+
+
+def _parse_obj(path: str, with_lines: bool = False):
+    """:func:`read_obj`, plus the line (from 1) of every triangle
+    ``[F]`` when ``with_lines`` (else :obj:`None`)."""
+    with open(path, 'r', encoding=TEXT_ENCODING, errors='replace') as f:
+        text = f.read()
+    lines = text.split('\n')  # numbered as the file's lines
+    numbers = None  # the line of every joined line, after continuations
+    if '\\\n' in text:
+        lines, numbers = _join_continuations(lines)
+    vertex_rows, vertex_lines, face_rows, face_lines, defined = \
+        [], [], [], [], []
+    for k, line in enumerate(lines):
+        if line[:1] in (' ', '\t'):
+            line = line.lstrip()
+        key = line[:2]
+        if key == 'v ' or key == 'v\t':
+            vertex_rows.append(line)
+            vertex_lines.append(k)
+        elif key == 'f ' or key == 'f\t':
+            face_rows.append(line)
+            face_lines.append(k)
+            defined.append(len(vertex_rows))
+
+    def malformed(what, rows, row_lines, parse):
+        for row, k in zip(rows, row_lines):
+            try:
+                parse(row)
+            except (ValueError, IndexError):
+                line = k + 1 if numbers is None else numbers[k] + 1
+                return ValueError(f"malformed {what} line {line}: "
+                                  f"{row.strip()[:60]!r}")
+        return ValueError(f'malformed {what} lines')
+
+    def vertex(row):  # x y z of one vertex line
+        values = [float(v) for v in row.split('#', 1)[0].split()[1:4]]
+        if len(values) != 3:
+            raise ValueError
+        return values
+
+    def corners(row):  # OBJ indices of one face line
+        values = [int(t.split('/', 1)[0])
+                  for t in row.split('#', 1)[0].split()[1:]]
+        if len(values) < 3 or 0 in values:
+            raise ValueError
+        return values
+
+    pos = np.zeros((0, 3))
+    if vertex_rows:
+        try:  # (w, or colours r g b, may follow x y z)
+            pos = np.loadtxt(vertex_rows, usecols=(1, 2, 3), comments='#',
+                             dtype=np.float64, ndmin=2)
+        except ValueError:
+            raise malformed('vertex', vertex_rows, vertex_lines,
+                            vertex) from None
+    if not face_rows:
+        return pos, None, None
+    try:
+        body = '\n'.join(face_rows)
+        if '#' in body:
+            body = '\n'.join(row.split('#', 1)[0] for row in face_rows)
+        # one number per corner: drop '/vt/vn' and the leading 'f'
+        body = re.sub(r'^f', '', re.sub(r'/\S*', '', body), flags=re.M)
+        try:  # every face the same polygon (one loop in C)
+            index = np.loadtxt(body.split('\n'), dtype=np.int64,
+                               comments=None, ndmin=2)
+            if len(index) != len(face_rows):  # it skips empty rows
+                raise ValueError
+            counts = np.full(len(index), index.shape[1])
+            index = index.reshape(-1)
+        except ValueError:  # mixed polygons
+            rows = [row.split() for row in body.split('\n')]
+            counts = np.array([len(row) for row in rows], dtype=np.int64)
+            index = np.array([int(v) for row in rows for v in row],
+                             dtype=np.int64)
+        if counts.min() < 3 or (index == 0).any():
+            raise ValueError
+    except ValueError:
+        raise malformed('face', face_rows, face_lines, corners) from None
+    if (index < 0).any():  # counted back from the last vertex defined
+        before = np.repeat(np.asarray(defined, dtype=np.int64), counts)
+        index = np.where(index > 0, index - 1, before + index)
+    else:
+        index = index - 1
+    triangles = counts - 2
+    if (counts == 3).all():
+        face = index.reshape(-1, 3)
+    else:  # fans (0, j, j + 1) of every polygon
+        start = np.repeat(np.cumsum(counts) - counts, triangles)
+        j = np.arange(triangles.sum()) - np.repeat(
+            np.cumsum(triangles) - triangles, triangles) + 1
+        face = np.stack([index[start], index[start + j],
+                         index[start + j + 1]], 1)
+    if not with_lines:
+        return pos, face, None
+    line = np.asarray(face_lines, dtype=np.int64)
+    if numbers is not None:
+        line = np.asarray(numbers, dtype=np.int64)[line]
+    return pos, face, np.repeat(line + 1, triangles)
+
+
+def _join_continuations(lines):
+    """OBJ lines with their ``\\``-continued lines joined, and the index
+    of the line each begins at."""
+    joined, numbers, parts = [], [], None
+    for k, line in enumerate(lines):
+        if parts is None:
+            parts, start = [], k
+        if line.endswith('\\'):
+            parts.append(line[:-1])
+            continue
+        parts.append(line)
+        joined.append(' '.join(parts))
+        numbers.append(start)
+        parts = None
+    if parts is not None:
+        joined.append(' '.join(parts))
+        numbers.append(start)
+    return joined, numbers
+
+
 def read_off(path: str) -> Tuple[np.ndarray, np.ndarray]:
     """Reads an OFF file (also ``COFF``/``NOFF`` with extra columns, and
     ModelNet's ``OFF<nv> <nf> <ne>`` single-line header). Polygons are
-    split into triangle fans."""
-    with open(path, 'r', errors='replace') as f:
+    split into triangle fans. A UTF-8 byte-order mark is ignored."""
+    with open(path, 'r', encoding=TEXT_ENCODING, errors='replace') as f:
         lines = [ln.split('#', 1)[0].strip() for ln in f]
     lines = [ln for ln in lines if ln]
     if not lines:
@@ -369,10 +635,14 @@ def read_signal(source: str, num_vertices: int,
     also accepts a signal with one row per vertex as stored in the file,
     before welding: the copies of a welded vertex must hold the same row.
 
-    Raises a :class:`ValueError` when the source is missing, unreadable,
-    not finite, or has another number of rows than ``num_vertices``.
+    Raises a :class:`ValueError` when the source is a folder, unreadable
+    (:func:`check_file`; :class:`FileNotFoundError` when missing), not
+    finite, or has another number of rows than ``num_vertices``. Text
+    files may begin with a UTF-8 byte-order mark.
     """
     properties = properties or {}
+    give = (f"a {'/'.join(SIGNAL_EXTENSIONS)} file with one row per "
+            f"vertex, or FILE.ply:NAME")
     ply, _, name = source.rpartition(':')
     if ply.lower().endswith('.ply'):
         _, _, props = read_surface(ply)
@@ -381,19 +651,24 @@ def read_signal(source: str, num_vertices: int,
                              f"has {sorted(props) or 'none'}")
         values = props[name]
     elif osp.splitext(source)[1].lower() in SIGNAL_EXTENSIONS:
-        if not osp.isfile(source):
-            raise FileNotFoundError(f"signal file '{source}' does not exist")
+        check_file(source, 'signal file', give)
         if source.lower().endswith('.npy'):
             values = read_npy(source)  # names what is wrong with the file
         else:
             try:
                 values = np.loadtxt(source, delimiter=',' if source.lower(
-                ).endswith('.csv') else None, ndmin=1)
-            except (OSError, ValueError) as error:
+                ).endswith('.csv') else None, ndmin=1,
+                    encoding=TEXT_ENCODING)
+            except OSError as error:
+                raise ValueError(f"could not read the signal '{source}': "
+                                 f"{os_error_reason(error)}") from error
+            except ValueError as error:
                 raise ValueError(f"could not read the signal '{source}': "
                                  f"{error}") from error
     elif source in properties:
         values = properties[source]
+    elif osp.isdir(source):
+        raise ValueError(f"signal '{source}' is a folder; give {give}")
     else:
         raise ValueError(
             f"signal {source!r} is neither a {'/'.join(SIGNAL_EXTENSIONS)} "
@@ -443,35 +718,52 @@ def _follow_weld(source: str, values: np.ndarray, inverse: np.ndarray,
 
 def write_ply(path: str, pos: np.ndarray, face: Optional[np.ndarray] = None,
               properties: Optional[Dict[str, np.ndarray]] = None,
-              colors: Optional[np.ndarray] = None) -> str:
+              colors: Optional[np.ndarray] = None,
+              typed_properties: Optional[Dict[str, np.ndarray]] = None
+              ) -> str:
     """Writes a binary little-endian PLY atomically: positions as doubles,
-    ``colors`` (``(N, 3)`` in [0, 1]) as ``red green blue`` bytes, every
-    entry of ``properties`` (``(N)`` or ``(N, C)``) as double vertex
-    properties (``name``, or ``name_0`` to ``name_{C-1}``), and triangles
-    ``face (F, 3)``. MeshLab, CloudCompare, Blender and trimesh read it.
-    Returns ``path``."""
+    then every entry of ``typed_properties`` in its own numeric type
+    (e.g. the vertex properties of an input file from
+    :func:`read_surface`, kept as they were: ``uchar`` colours stay
+    ``uchar``, ``float`` stays ``float``; 64-bit integers become ``int``
+    or ``uint`` when they fit, else ``double``), ``colors`` (``(N, 3)``
+    in [0, 1]) as ``red green blue`` bytes, every entry of
+    ``properties`` as double vertex properties, and triangles
+    ``face (F, 3)``. A property of shape ``(N)`` is written as ``name``,
+    one of shape ``(N, C)`` as ``name_0`` to ``name_{C-1}``; two of one
+    name are a :class:`ValueError`. MeshLab, CloudCompare, Blender and
+    trimesh read it. Returns ``path``."""
     pos = np.asarray(pos, dtype=np.float64)
     n = len(pos)
     fields = [('x', '<f8'), ('y', '<f8'), ('z', '<f8')]
     columns = [pos[:, 0], pos[:, 1], pos[:, 2]]
+
+    def add(name, values, kind=None):
+        values = np.asarray(values).reshape(n, -1)
+        kind = kind or _ply_type(values)
+        names = [name] if values.shape[1] == 1 else \
+            [f'{name}_{k}' for k in range(values.shape[1])]
+        for k, column in enumerate(names):
+            if column in (field for field, _ in fields):
+                raise ValueError(f"two vertex properties named {column!r}")
+            fields.append((column, kind))
+            columns.append(values[:, k])
+
+    for name, values in (typed_properties or {}).items():
+        add(name, values)
     if colors is not None:
         colors = np.asarray(colors, dtype=np.float64).reshape(n, 3)
         rgb = (np.clip(np.nan_to_num(colors), 0, 1) * 255 + 0.5).astype(
             np.uint8)
         for k, name in enumerate(('red', 'green', 'blue')):
-            fields.append((name, 'u1'))
-            columns.append(rgb[:, k])
+            add(name, rgb[:, k], 'u1')
     for name, values in (properties or {}).items():
-        values = np.asarray(values, dtype=np.float64).reshape(n, -1)
-        names = [name] if values.shape[1] == 1 else \
-            [f'{name}_{k}' for k in range(values.shape[1])]
-        for k, column in enumerate(names):
-            fields.append((column, '<f8'))
-            columns.append(values[:, k])
+        add(name, np.asarray(values, dtype=np.float64), '<f8')
     vertices = np.empty(n, dtype=fields)
     for (name, _), column in zip(fields, columns):
         vertices[name] = column
-    types = {'<f8': 'double', 'u1': 'uchar'}
+    types = {'<f8': 'double', '<f4': 'float', 'u1': 'uchar', 'i1': 'char',
+             '<u2': 'ushort', '<i2': 'short', '<u4': 'uint', '<i4': 'int'}
     header = ['ply', 'format binary_little_endian 1.0',
               'comment written by tg_intrinsic', f'element vertex {n}']
     header += [f'property {types[t]} {name}' for name, t in fields]
@@ -493,3 +785,23 @@ def write_ply(path: str, pos: np.ndarray, face: Optional[np.ndarray] = None,
 
     atomic_write(path, write, 'wb')
     return path
+
+
+def _ply_type(values: np.ndarray) -> str:
+    """The little-endian numpy type code of the PLY type that holds
+    ``values`` exactly (double when none does)."""
+    kind, size = values.dtype.kind, values.dtype.itemsize
+    if kind == 'b':
+        return 'u1'
+    if kind in 'iu' and size == 8:  # PLY has no 64-bit integers
+        for code in ('<i4', '<u4'):
+            info = np.iinfo(code)
+            if values.size == 0 or (values.min() >= info.min and
+                                    values.max() <= info.max):
+                return code
+        return '<f8'
+    if kind in 'iu':
+        return {1: kind + '1'}.get(size, f'<{kind}{size}')
+    if kind == 'f' and size <= 4:
+        return '<f4'
+    return '<f8'

@@ -9,7 +9,7 @@ from typing import Optional, Tuple
 import numpy as np
 
 from .hdr import read_npy
-from .mesh import read_surface
+from .mesh import TEXT_ENCODING, check_file, read_surface
 
 POINT_EXTENSIONS = ('.ply', '.txt', '.xyz', '.npy', '.pts')
 # PLY vertex properties read as a per-point label
@@ -21,15 +21,16 @@ def read_table(path: str, max_rows: Optional[int] = None) -> np.ndarray:
     column) ``.npy`` array, or a text file with one row per line whose
     values are separated by whitespace or by commas (decided from the first
     4 KiB of the file: commas if any). Blank lines and ``#`` comments are
-    skipped. ``max_rows`` reads only the first rows of a text file.
+    skipped, and so is a UTF-8 byte-order mark at the start. ``max_rows``
+    reads only the first rows of a text file.
 
-    Raises a :class:`ValueError` that names the file when it cannot be
-    read, is empty, has rows of different lengths, non-numeric entries, or
-    NaN or infinite values.
+    Raises an error that names the file when it does not exist
+    (:class:`FileNotFoundError`), is a folder or cannot be read
+    (:func:`~tg_intrinsic.io.mesh.check_file`), and a
+    :class:`ValueError` when it is empty, has rows of different lengths,
+    non-numeric entries, or NaN or infinite values.
     """
-    path = os.fspath(path)
-    if not osp.isfile(path):
-        raise FileNotFoundError(f"'{path}' does not exist")
+    path = check_file(path)  # missing, a folder, unreadable: named
     if path.lower().endswith('.npy'):
         table = read_npy(path)  # names what is wrong with the file
         if table.ndim == 1:
@@ -43,8 +44,13 @@ def read_table(path: str, max_rows: Optional[int] = None) -> np.ndarray:
             with warnings.catch_warnings():  # an empty file: error below
                 warnings.simplefilter('ignore', UserWarning)
                 table = np.loadtxt(path, delimiter=',' if comma else None,
-                                   ndmin=2, max_rows=max_rows)
-        except (OSError, ValueError) as error:
+                                   ndmin=2, max_rows=max_rows,
+                                   encoding=TEXT_ENCODING)
+        except OSError as error:
+            raise ValueError(f"could not read '{path}': "
+                             f"{(error.strerror or str(error)).lower()}"
+                             ) from error
+        except ValueError as error:
             raise ValueError(f"could not read '{path}': {error}") from error
     if table.ndim != 2 or table.size == 0:
         raise ValueError(f"'{path}' holds no table of numbers (shape "

@@ -30,7 +30,8 @@ except ImportError:  # pragma: no cover - Windows
     fcntl = None
     import msvcrt
 
-from tg_intrinsic.utils import atomic_write_json, current_umask
+from tg_intrinsic.utils import (atomic_write_json, current_umask,
+                                os_error_reason)
 
 # The record of the files a run wrote, in every result folder.
 RECORD = '.tg-intrinsic.json'
@@ -89,9 +90,17 @@ def output_lock(path: str, option: str = '--out') -> Iterator[None]:
     removed when the block ends; the operating system releases it when
     its process dies, so a killed run never blocks the next one."""
     lock_path = _hidden(os.path.realpath(path), _LOCK)
-    os.makedirs(os.path.dirname(lock_path), exist_ok=True)
     while True:
-        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, folder_mode() & 0o666)
+        try:
+            os.makedirs(os.path.dirname(lock_path), exist_ok=True)
+            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT,
+                         folder_mode() & 0o666)
+        except OSError as error:   # the folder's, not the lock's, problem
+            raise ValueError(
+                f"{option} '{path}' cannot be written: its folder "
+                f"'{os.path.dirname(lock_path)}' does not take new files "
+                f"({os_error_reason(error)}); give another "
+                f"{option}") from None
         if not _try_lock(fd):
             os.close(fd)
             raise ValueError(

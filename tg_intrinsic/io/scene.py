@@ -229,7 +229,7 @@ def _read_cameras_json(folder: str) -> dict:
                          f"camera (K, R, t); run 'tg-intrinsic svbrdf "
                          f"--write-example DIR' to see the format")
     try:
-        with open(path, 'r', encoding='utf-8') as f:
+        with open(path, 'r', encoding='utf-8-sig') as f:
             spec = json.load(f)
     except json.JSONDecodeError as error:
         raise ValueError(f"'{path}' is not valid JSON: {error.msg} at line "

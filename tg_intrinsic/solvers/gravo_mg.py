@@ -1,7 +1,8 @@
+import numbers
 import time
 import warnings
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Sequence, Union
+from typing import Callable, Dict, List, Optional, Sequence, Union
 
 import numpy as np
 import scipy.sparse as sp
@@ -27,7 +28,53 @@ METHODS = ('cycles', 'pcg')
 
 class ConvergenceWarning(UserWarning):
     """A :meth:`GravoMG.solve` stopped at ``max_iter`` cycles above its
-    tolerance (``strict=True`` raises instead)."""
+    tolerance (``strict=True`` raises instead).
+
+    Its attributes say where it stopped: ``max_iter``, ``method``
+    (``'cycles'`` or ``'pcg'``), ``criterion``, ``residual`` (the last
+    one) and ``tol``. :meth:`reason` words it with the arguments that
+    change the outcome; an interface with other names for them (the
+    command line's options) passes its own wording of a setting."""
+
+    def __init__(self, message: str = '', max_iter: Optional[int] = None,
+                 method: str = 'cycles', criterion: str = 'relative',
+                 residual: float = float('nan'), tol: float = float('nan')):
+        self.max_iter, self.method, self.criterion = max_iter, method, \
+            criterion
+        self.residual, self.tol = residual, tol
+        super().__init__(message or (
+            f'GravoMG.solve did not converge: {self.reason()}'
+            if max_iter is not None else ''))
+
+    def __reduce__(self):
+        return (self.__class__, (str(self), self.max_iter, self.method,
+                                 self.criterion, self.residual, self.tol))
+
+    def reason(self, setting: Optional[Callable[..., str]] = None) -> str:
+        """Why the solve stopped and what to change, e.g. ``stopped at
+        max_iter=5 cycles with relative residual 0.0012 above
+        tol=1e-08; raise max_iter, or use method='pcg'``.
+        ``setting(name, value)`` words the argument ``name`` (one of
+        ``'max_iter'``, ``'tol'``, ``'method'``) set to ``value``, and
+        ``setting(name)`` the argument alone; by default as in Python."""
+        setting = setting or _python_setting
+        unit = 'cycles' if self.method == 'cycles' else 'PCG iterations'
+        return (f"stopped at {setting('max_iter', self.max_iter)} {unit} "
+                f"with {self.criterion} residual {self.residual:.3g} above "
+                f"{setting('tol', self.tol)}; raise {setting('max_iter')}"
+                + (f", or use {setting('method', 'pcg')}"
+                   if self.method == 'cycles' else ''))
+
+
+def _python_setting(name: str, value=None) -> str:
+    """A keyword argument as written in Python: ``name=value``."""
+    if value is None:
+        return name
+    if isinstance(value, str):
+        return f'{name}={value!r}'
+    if isinstance(value, numbers.Integral):
+        return f'{name}={int(value)}'
+    return f'{name}={value:g}'
 
 
 @dataclass
@@ -471,18 +518,13 @@ class GravoMG:
                 break
         info.solve_time = time.perf_counter() - start
         if not info.converged:
-            unit = 'cycles' if method == 'cycles' else 'PCG iterations'
-            info.reason = (f"stopped at max_iter={max_iter} {unit} "
-                           f"with {criterion} residual "
-                           f"{info.residuals[-1]:.3g} above tol={tol:g}; "
-                           f"raise max_iter" + (
-                               ", or use method='pcg'"
-                               if method == 'cycles' else ''))
+            warning = ConvergenceWarning(
+                max_iter=max_iter, method=method, criterion=criterion,
+                residual=info.residuals[-1], tol=float(tol))
+            info.reason = warning.reason()
             if strict:
-                raise RuntimeError(f"GravoMG.solve did not converge: "
-                                   f"{info.reason}")
-            warnings.warn(f"GravoMG.solve did not converge: {info.reason}",
-                          ConvergenceWarning, stacklevel=2)
+                raise RuntimeError(str(warning))
+            warnings.warn(warning, stacklevel=2)
         return X.reshape(b.shape)
 
     def _torch_levels(self, levels: _Levels, device, dtype) -> TorchLevels:

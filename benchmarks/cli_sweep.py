@@ -165,11 +165,61 @@ def make_files(root: str):
         half = f.read()[:1000]
     with open(checkpoint, 'wb') as f:
         f.write(half)
+    make_round_two_files(root, ico)
     for split in ('train', 'test'):  # a folder of one class
         os.makedirs(os.path.join(root, 'one_class', 'ball', split))
         for k in range(2):
             trimesh.creation.icosphere(1).export(os.path.join(
                 root, 'one_class', 'ball', split, f'{k}.obj'))
+
+
+def make_round_two_files(root: str, ico):
+    """Files of the second sweep (issue 40): links to output folders,
+    files with a byte-order mark, coloured meshes, two objects in one OBJ,
+    a user's files beside precompute's results."""
+    os.makedirs(os.path.join(root, 'scratch'))
+    os.makedirs(os.path.join(root, 'folder.pt'))
+    os.symlink('scratch', os.path.join(root, 'runs'))   # relative: copies
+    os.symlink('earlier', os.path.join(root, 'earlier_link'))
+    obj = open(os.path.join(root, 'ico.obj')).read()
+    vertices_first = ''.join(line + '\n' for line in obj.splitlines()
+                             if line.startswith('v ')) + ''.join(
+        line + '\n' for line in obj.splitlines() if line.startswith('f '))
+    bom = '\ufeff'
+    open(os.path.join(root, 'bom.obj'), 'w', encoding='utf-8').write(
+        bom + vertices_first)
+    open(os.path.join(root, 'bom.off'), 'w', encoding='utf-8').write(
+        bom + open(os.path.join(root, 'ico.off')).read())
+    open(os.path.join(root, 'bom_ascii.ply'), 'w', encoding='utf-8').write(
+        bom + open(os.path.join(root, 'ascii.ply')).read())
+    second = trimesh.creation.icosphere(2)
+    second.apply_translation([3, 0, 0])
+    two = trimesh.Scene({'first': ico, 'second': second})
+    two.export(os.path.join(root, 'two_objects.obj'))
+    n = len(ico.vertices)
+    colours = np.arange(3 * n).reshape(n, 3) % 256
+    write_ply(os.path.join(root, 'colours.ply'), ico.vertices + 0.0,
+              ico.faces, properties={
+                  'red': colours[:, 0].astype(np.uint8),
+                  'green': colours[:, 1].astype(np.uint8),
+                  'blue': colours[:, 2].astype(np.uint8),
+                  'nx': ico.vertex_normals[:, 0],
+                  'ny': ico.vertex_normals[:, 1],
+                  'nz': ico.vertex_normals[:, 2],
+                  'quality': np.linspace(0, 1, n)})
+    flat = np.vstack([ico.vertices, ico.vertices[:1]])
+    trimesh.Trimesh(flat, np.vstack([ico.faces, [[0, 1, n]]]),
+                    process=False).export(
+        os.path.join(root, 'degenerate.obj'))
+    with contextlib.redirect_stderr(io.StringIO()), \
+            contextlib.redirect_stdout(io.StringIO()):
+        assert main(['precompute', 'mls', os.path.join(root, 'meshes'),
+                     os.path.join(root, 'kept'), '--k', '3',
+                     '--quiet']) == 0
+    import torch
+    torch.save({'labels': 1}, os.path.join(root, 'kept', 'labels.pt'))
+    os.makedirs(os.path.join(root, 'kept', 'mine'))
+    torch.save({'notes': 1}, os.path.join(root, 'kept', 'mine', 'notes.pt'))
 
 
 # ---------------------------------------------------------------- checks
@@ -450,11 +500,93 @@ def cases():
     yield T + ['deltanet', '--out', '{}/meshes'] + tiny, 2, None
 
 
+VERDICTS = ('allowed_exit_code', 'as_expected', 'data_kept',
+            'no_stray_files', 'right_result', 'message_names_input')
+
 # options of train that take no negative value (checked after parsing)
 TRAIN_POSITIVE = ('--epochs', '--batch-size', '--num-points', '--lr', '--k',
                   '--rings', '--eval-every', '--workers', '--threads',
                   '--dropout', '--radius', '--weight-decay', '--max-order',
                   '--embedding-size', '--mlp-depth', '--gamma')
+
+
+def round_two():
+    """The cases of the second sweep (issue 40): links, long and odd
+    names, byte-order marks, what results keep, a user's files beside
+    precompute's, messages."""
+    S = ['solve']
+    ok = {'report.json', 'result.ply', 'result.png'}
+
+    def solve_ok(count, link=None, keeps=()):
+        def check(root, out):
+            names = set(os.listdir(out))
+            if not ok <= names or vertices_of(
+                    os.path.join(out, 'result.ply')) != count:
+                return False
+            if link and not os.path.islink(os.path.join(root, link)):
+                return False
+            if keeps:
+                from tg_intrinsic.io import read_surface
+                properties = read_surface(os.path.join(out, 'result.ply'),
+                                          weld=False)[2]
+                return set(keeps) <= set(properties)
+            return True
+        return check
+    for link in ('runs', 'earlier_link'):
+        yield S + ['{}/ico.obj', '--smooth', '1e-3', '--out',
+                   f'{{}}/{link}'], 0, solve_ok(162, link)
+    yield ['precompute', 'mls', '{}/meshes', '{}/runs', '--k', '4'], 0, \
+        lambda root, out: os.path.islink(os.path.join(root, 'runs')) and \
+        os.path.exists(os.path.join(root, 'scratch', 'precompute.json'))
+    yield ['svbrdf', '{}/scene', '--out', '{}/runs'], 0, \
+        lambda root, out: os.path.islink(os.path.join(root, 'runs')) and \
+        os.path.exists(os.path.join(root, 'scratch', 'maps.npz'))
+    yield ['train', 'deltanet', '--out', '{}/runs'] + TINY_TRAINING, 0, \
+        lambda root, out: os.path.islink(os.path.join(root, 'runs')) and \
+        os.path.exists(os.path.join(root, 'scratch', 'checkpoint.pt'))
+    # a user's files beside precompute's results survive --overwrite
+    yield ['precompute', 'mls', '{}/meshes', '{}/kept', '--k', '8',
+           '--overwrite'], 0, lambda root, out: all(os.path.exists(
+               os.path.join(out, name)) for name in (
+               'labels.pt', os.path.join('mine', 'notes.pt'), 'a/x.pt'))
+    yield ['precompute', 'mls', '{}/meshes', '{}/kept', '--k', '3'], 2, \
+        None
+    # names: too long for the file system, long, odd
+    yield S + ['{}/ico.obj', '--smooth', '1', '--out', '{}/' + 'x' * 300], \
+        2, None
+    yield S + ['{}/ico.obj', '--smooth', '1e-3', '--out', '{}/' + 'y' * 250],\
+        0, solve_ok(162)
+    yield ['precompute', 'mls', '{}/ico.obj', '{}/' + 'z' * 300 + '.pt'], \
+        2, None
+    yield S + ['{}/ico.obj', '--smooth', '1e-3', '--out',
+               '{}/odd name ü\t#1'], 0, solve_ok(162)
+    yield ['svbrdf', '--write-example', '{}/' + 'w' * 300], 2, None
+    # a byte-order mark (Notepad's) in every text format
+    for name in ('bom.obj', 'bom.off', 'bom_ascii.ply'):
+        yield S + [f'{{}}/{name}', '--smooth', '1e-3', '--out', '{}/o'], \
+            0, solve_ok(162)
+    # what the results keep: two objects, colours, normals, properties
+    yield S + ['{}/two_objects.obj', '--smooth', '1e-3', '--out', '{}/o'], \
+        0, solve_ok(324)
+    yield S + ['{}/colours.ply', '--smooth', '1e-3', '--signal',
+               '{}/colours.ply:quality', '--out', '{}/o'], 0, \
+        solve_ok(162, keeps=('red', 'green', 'blue', 'nx', 'ny', 'nz',
+                             'quality'))
+    # fairing moves the vertices: their old normals are left out
+    yield S + ['{}/colours.ply', '--smooth', '1e-3', '--out', '{}/o'], 0, \
+        solve_ok(162, keeps=('red', 'green', 'blue', 'quality'))
+    # messages that name the file or the option
+    yield S + ['{}/degenerate.obj', '--smooth', '1', '--out', '{}/o'], 2, \
+        None
+    yield S + ['/proc/nope', '--smooth', '1', '--out', '{}/o'], 2, None
+    yield S + ['{}/ico.obj', '--smooth', '1', '--signal', '{}/empty',
+               '--out', '{}/o'], 2, None
+    yield ['precompute', 'mls', '{}/ico.obj', '{}/folder.pt', '--k',
+           '4'], 2, None
+    yield ['precompute', 'mls', '{}/meshes', '{}/p', '--normal-k', '1'], 2, \
+        None
+    yield ['train', 'deltanet', '--out', '{}/t'] + TINY_TRAINING + [
+        '--num-points', '2'], 2, None
 
 
 def interrupted():
@@ -508,6 +640,75 @@ def every_numeric_option():
                     yield argv + [option, value], 2, None
 
 
+CONCURRENT = {
+    'solve': (['solve', '{}/ico.obj', '--smooth', '1e-3', '--out',
+               '{}/same'], 4),
+    'precompute': (['precompute', 'gravo', '{}/meshes', '{}/same',
+                    '--lower-bound', '10'], 3),
+    'svbrdf': (['svbrdf', '{}/scene', '--out', '{}/same', '--refine', '0'],
+               2),
+}
+
+
+def concurrent_runs(base, trials: int = 3):
+    """Several processes of one command into one output folder at once:
+    one run writes it, the others stop with exit 2 naming it; the folder
+    then holds every file its record lists, and no staging is left."""
+    import subprocess
+    from tg_intrinsic.io.results import RECORD
+    results = []
+    for command, (template, count) in CONCURRENT.items():
+        for trial in range(trials):
+            root = tempfile.mkdtemp(prefix='sweep-')
+            shutil.rmtree(root)
+            shutil.copytree(base, root, symlinks=True)
+            argv = [a.replace('{}', root) for a in template]
+            before = snapshot(root)
+            start = time.perf_counter()
+            runs = [subprocess.Popen(
+                [sys.executable, '-m', 'tg_intrinsic', '--quiet'] + argv,
+                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                text=True) for _ in range(count)]
+            said = [run.communicate(timeout=900)[1] for run in runs]
+            seconds = time.perf_counter() - start
+            out = os.path.join(root, 'same')
+            record = os.path.join(out, RECORD if command != 'precompute'
+                                  else 'precompute.json')
+            try:
+                with open(record) as f:
+                    listed = json.load(f)['files']
+                whole = all(os.path.exists(os.path.join(out, name))
+                            for name in listed)
+            except (OSError, ValueError, KeyError):
+                whole = False
+            after = snapshot(root)
+            changed = [name for name, digest in before.items()
+                       if after.get(name) != digest]
+            stray = [name for name in os.listdir(root)
+                     if name.startswith('.')]
+            winners = sum(run.returncode == 0 for run in runs)
+            for run, stderr in zip(runs, said):
+                lines = stderr.strip().splitlines()
+                message = lines[-1] if lines else ''
+                results.append({
+                    'argv': [a.replace(root, '{}') for a in argv],
+                    'exit_code': run.returncode, 'expected': 'one 0, rest 2',
+                    'message': message.replace(root, '{}'),
+                    'seconds': round(seconds, 2),
+                    'allowed_exit_code': run.returncode in (0, 2, 130),
+                    'as_expected': winners >= 1 and (
+                        run.returncode == 0 or 'is being written by another '
+                        'run' in message),
+                    'data_kept': not changed, 'changed': changed,
+                    'no_stray_files': not stray, 'stray': stray[:5],
+                    'right_result': whole,
+                    'message_names_input': run.returncode != 2 or
+                    named(message, argv),
+                    'interrupted': False, 'concurrent': count})
+            shutil.rmtree(root, ignore_errors=True)
+    return results
+
+
 def run_case(base, template, expected, check, interrupt=None):
     """Runs one case in a copy of the sandbox ``base`` (``interrupt``:
     ``(module, name)`` of a function that then raises KeyboardInterrupt)."""
@@ -539,7 +740,9 @@ def run_case(base, template, expected, check, interrupt=None):
     seconds = time.perf_counter() - start
     after = snapshot(root)
     out = out_folder(argv)
-    out_rel = None if out is None else os.path.relpath(out, root)
+    # a linked output folder is written through: its target is the region
+    out_rel = None if out is None else os.path.relpath(
+        os.path.realpath(out), os.path.realpath(root))
     lines = [ln for ln in stderr.getvalue().splitlines()
              if ': error:' in ln or 'unexpected' in ln or
              'interrupted' in ln]
@@ -560,11 +763,11 @@ def run_case(base, template, expected, check, interrupt=None):
                                f'.{os.path.basename(out_rel)}.overwrite')]
     if code != 0 and not precompute:
         regions = []
+    # (folder data sets cache what they read under train's --root, not
+    # beside the data)
     stray = [name for name in after if name not in before and
              not any(name == r or name.startswith(r + os.sep)
-                     for r in regions)
-             # PyG-style folder data sets cache what they read beside it
-             and 'processed_tg_intrinsic' not in name]
+                     for r in regions)]
     result = {
         'argv': [a.replace(root, '{}') for a in argv],
         'exit_code': code, 'expected': expected,
@@ -614,17 +817,20 @@ def main_sweep():
     base = tempfile.mkdtemp(prefix='sweep-base-')
     make_files(base)
     results = []
-    for case in list(cases()) + list(interrupted()) + list(
-            every_numeric_option()):
+    for case in list(cases()) + list(round_two()) + list(interrupted()) + \
+            list(every_numeric_option()):
         result = run_case(base, *case)
         results.append(result)
-        verdict = all(result[k] for k in (
-            'allowed_exit_code', 'as_expected', 'data_kept',
-            'no_stray_files', 'right_result', 'message_names_input'))
+        verdict = all(result[k] for k in VERDICTS)
         print(f"{'ok ' if verdict else 'BAD'} {result['exit_code']!s:>3} "
               f"{' '.join(result['argv'])[:90]}", flush=True)
         if not verdict:
             print(f"      {result}", flush=True)
+    for result in concurrent_runs(base):
+        results.append(result)
+        print(f"{'ok ' if all(result[k] for k in VERDICTS) else 'BAD'} "
+              f"{result['exit_code']!s:>3} x{result['concurrent']} "
+              f"{' '.join(result['argv'])[:85]}", flush=True)
     shutil.rmtree(base, ignore_errors=True)
     counts = {
         'cases': len(results),

@@ -799,6 +799,7 @@ def gravo_diffusion(d, _):
 
 @rows_for('compile_precision')
 def compile_precision(d, _):
+    seeds = next(iter(d['accuracy'].values()))['seeds']
     parts = []
     for name, row in d['speed'].items():
         model, task = name.split('_', 1)
@@ -808,15 +809,16 @@ def compile_precision(d, _):
             f"{times(row['compiled_bf16_speedup'])} (logits within "
             f"{pct(row['bf16_logits_gap'], 1)})")
     accuracy = '; '.join(
-        f"{name} {pct(run['32-true'], 1)} (float32) vs "
-        f"{pct(run['bf16-mixed'], 1)} (bf16-mixed), "
-        f"**{run['points_apart']:.1f} points apart**"
+        f"{name} {pct(run['32-true_mean'], 1)} (float32) vs "
+        f"{pct(run['bf16-mixed_mean'], 1)} (bf16-mixed), "
+        f"**{run['points_apart']:.1f} points apart** (paired spread "
+        f"{run['paired_stdev_points']:.1f} points)"
         for name, run in d['accuracy'].items())
     quick = ' (quick smoke run)' if d.get('quick') else ''
     result = (f"training step over eager float32{quick}, "
               f"{d['threads']} threads, {d['conditions']}: "
-              + '; '.join(parts) + f". Final test accuracy: {accuracy} "
-              f"(goal: within 1 point)")
+              + '; '.join(parts) + f". Final test accuracy, mean of "
+              f"{len(seeds)} seeds: {accuracy} (goal: within 1 point)")
     return [('torch.compile and bfloat16 autocast: DeltaNet and HSN training '
              'steps against eager float32, the accuracy of bf16-mixed '
              'training', 'compile_precision.py', result)]
@@ -884,9 +886,13 @@ def normalisation(d, _):
 @rows_for('cli_sweep')
 def cli_sweep(d, _):
     c = d['counts']
+    together = [r for r in d['cases'] if r.get('concurrent')]
     result = (f"{c['cases']} command lines over every sub-command (files "
               f"other tools write, every numeric option, earlier results, "
-              f"resumes, Ctrl-C while writing): exit 0 {c['exit_0']}, exit 2 "
+              f"resumes, Ctrl-C while writing, linked output folders, "
+              f"byte-order marks, names too long for the file system, "
+              f"{len(together)} runs started 2-4 at a time into one "
+              f"folder): exit 0 {c['exit_0']}, exit 2 "
               f"{c['exit_2']}, exit 130 {c.get('exit_130', 0)}, "
               f"**other exit codes {c['other_exit_codes']}, lost or changed "
               f"files {c['data_loss']}, stray files {c['stray_files']}, "

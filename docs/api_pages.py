@@ -7,7 +7,8 @@ is here."""
 
 #: page title -> modules
 API_PAGES = {
-    'tg_intrinsic': ['tg_intrinsic', 'tg_intrinsic.surface_attributes'],
+    'tg_intrinsic': ['tg_intrinsic', 'tg_intrinsic.surface_attributes',
+                     'tg_intrinsic.errors'],
     'geometry': ['tg_intrinsic.geometry', 'tg_intrinsic.geometry.texture',
                  'tg_intrinsic.geometry.precision', 'tg_intrinsic.geometry.jit',
                  'tg_intrinsic.geometry.sphere_images',
@@ -23,7 +24,9 @@ API_PAGES = {
                  'tg_intrinsic.geometry.appearance.cameras',
                  'tg_intrinsic.geometry.appearance.raster',
                  'tg_intrinsic.geometry.appearance.lighting',
-                 'tg_intrinsic.geometry.appearance.direct_lighting'],
+                 'tg_intrinsic.geometry.appearance.direct_lighting',
+                 'tg_intrinsic.geometry.appearance.dynamic_range',
+                 'tg_intrinsic.geometry.appearance.splat'],
     'transforms': ['tg_intrinsic.transforms'],
     'nn': ['tg_intrinsic.nn', 'tg_intrinsic.nn.harmonic_resnet_block'],
     'nn.models': ['tg_intrinsic.nn.models'],

@@ -125,3 +125,81 @@ def test_every_public_module_has_its_test_module():
                 module = os.path.normpath(os.path.join(folder, file))
                 missing.append(f'{module}: {os.path.relpath(test, TESTS)}')
     assert not missing, 'modules without tests:\n' + '\n'.join(missing)
+
+
+# ../shared/DESIGN.md's order: a module imports only from its own floor or
+# below (geometry <- transforms <- nn/pool/solvers <- io <- datasets,
+# training, cli)
+FLOORS = {'errors': 0, 'utils': 0, 'devices': 0, 'geometry': 0,
+          'parallel': 1, 'surface_attributes': 1, 'data': 1,
+          'transforms': 2, 'nn': 3, 'pool': 3, 'solvers': 3, 'io': 4,
+          'datasets': 5, 'protocols': 5, 'distributed': 5, 'train': 5,
+          'training': 5, 'cli': 6, '__main__': 7}
+
+
+def package_imports():
+    """``{module: {imported tg_intrinsic modules}}`` of every module of
+    the package, imports inside functions included."""
+    root = os.path.dirname(tg_intrinsic.__file__)
+    found = {}
+    for folder, _, files in os.walk(root):
+        for name in files:
+            if not name.endswith('.py'):
+                continue
+            path = os.path.join(folder, name)
+            module = 'tg_intrinsic.' + os.path.relpath(
+                path, root)[:-3].replace(os.sep, '.')
+            module = module.removesuffix('.__init__')
+            package = module if name == '__init__.py' else \
+                module.rsplit('.', 1)[0]
+            targets = set()
+            for node in ast.walk(ast.parse(open(path).read())):
+                if isinstance(node, ast.ImportFrom):
+                    base = node.module or ''
+                    if node.level:
+                        parts = package.split('.')
+                        parts = parts[:len(parts) - node.level + 1]
+                        base = '.'.join(parts + ([base] if base else []))
+                    # a name may be a module of the package or an
+                    # attribute of ``base``
+                    names = [f'{base}.{a.name}' if os.path.exists(
+                        module_path(f'{base}.{a.name}')) else base
+                        for a in node.names]
+                    targets.update(n for n in names
+                                   if n.startswith('tg_intrinsic'))
+                elif isinstance(node, ast.Import):
+                    targets.update(a.name for a in node.names
+                                   if a.name.startswith('tg_intrinsic'))
+            found[module] = targets
+    return found
+
+
+def module_path(module: str) -> str:
+    """The file of a module of the package (a package's ``__init__``)."""
+    path = os.path.join(os.path.dirname(PACKAGE),
+                        *module.split('.'))
+    return path + '.py' if not os.path.isdir(path) else path
+
+
+def floor_of(module: str):
+    parts = module.split('.')
+    return FLOORS.get(parts[1]) if len(parts) > 1 else None
+
+
+def test_imports_only_run_down_the_layers():
+    upward = [f'{module} -> {target}'
+              for module, targets in package_imports().items()
+              for target in targets
+              if floor_of(target) is not None and floor_of(module) is not None
+              and floor_of(target) > floor_of(module)]
+    assert not upward, upward
+    unknown = {module.split('.')[1] for module in package_imports()
+               if '.' in module and floor_of(module) is None}
+    assert not unknown, f'give these a floor in FLOORS: {unknown}'
+
+
+def test_no_two_modules_import_each_other():
+    imports = package_imports()
+    both = sorted({tuple(sorted((a, b))) for a, targets in imports.items()
+                   for b in targets if a != b and a in imports.get(b, ())})
+    assert not both, both

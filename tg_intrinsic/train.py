@@ -113,7 +113,7 @@ from tqdm import tqdm
 from tg_intrinsic import distributed
 from tg_intrinsic.devices import (PRECISIONS, autocast, check_device,
                                   check_precision, default_threads)
-from tg_intrinsic.cli.common import UsageError, one_line
+from tg_intrinsic.errors import UsageError, one_line
 from tg_intrinsic.io.figures import save_figure
 from tg_intrinsic.io.results import (RECORD, check_output_path, claim_folder,
                                      output_lock, recorded_files,

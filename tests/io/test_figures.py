@@ -15,7 +15,8 @@ from tg_intrinsic.geometry.appearance.cameras import look_at_cameras
 from tg_intrinsic.io import figures
 from tg_intrinsic.io.figures import (VIEWS, draw_surface, line_figure,
                                      render_surface, save_figure,
-                                     splat_index, value_range)
+                                     value_range)
+from tg_intrinsic.geometry.appearance.splat import splat_index
 from tests.conftest import fibonacci_sphere, icosphere
 
 PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
@@ -154,22 +155,6 @@ def test_point_clouds_show_the_nearest_point():
     assert np.allclose(centre, centre[..., :1])  # grey
     assert centre.min() > 0.7 and centre.max() <= 0.75 + 1e-9
     assert (image[[0, 0, -1, -1], [0, -1, 0, -1]] == 1).all()
-
-
-def test_splat_index_keeps_the_nearer_of_two_points_and_skips_the_rest():
-    K, E = look_at_cameras(torch.tensor([[0.0, 0.0, 5.0]]),
-                           fov_degrees=40.0, image_size=(32, 32))
-    # two points on the optical axis, and one to the side for the spacing
-    pos = torch.tensor([[0.0, 0.0, -1.0], [0.0, 0.0, 1.0], [0.3, 0.0, 0.0]],
-                       dtype=torch.float64)
-    index = splat_index(pos, K[0], E[0], (32, 32))
-    assert index[16, 16] == 1  # z = 1 is nearer to the camera at z = 5
-    assert set(np.unique(index)) == {-1, 1, 2}
-    behind = torch.tensor([[0.0, 0.0, 6.0], [0.1, 0.0, 7.0]],
-                          dtype=torch.float64)
-    assert (splat_index(behind, K[0], E[0], (32, 32)) == -1).all()
-    outside = torch.tensor([[40.0, 0.0, 0.0]], dtype=torch.float64)
-    assert (splat_index(outside, K, E, (32, 32)) == -1).all()
 
 
 # --- files -----------------------------------------------------------------

@@ -1,5 +1,6 @@
-"""What every sub-command shares: the user-error type, argument types that
-reject bad values in one line, and progress bars (output folders:
+"""What every sub-command shares: argument types that reject bad values in
+one line, messages of errors and progress bars (the user-error type lives
+in :mod:`tg_intrinsic.errors`, output folders in
 :mod:`tg_intrinsic.io.results`)."""
 import argparse
 import inspect
@@ -11,12 +12,8 @@ from typing import Iterable, Optional
 
 from tqdm.auto import tqdm
 
+from tg_intrinsic.errors import UsageError, one_line  # noqa: F401
 from tg_intrinsic.utils import os_error_reason
-
-
-class UsageError(ValueError):
-    """A mistake in what the user asked for (a missing file, a bad value):
-    the command line prints the message on one line and exits with 2."""
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -26,11 +23,6 @@ class ArgumentParser(argparse.ArgumentParser):
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} "
                      f"--help)\n")
-
-
-def one_line(message: str) -> str:
-    """A (possibly multi-line) error message as one line."""
-    return ' '.join(str(message).split())
 
 
 def user_message(error: BaseException) -> str:

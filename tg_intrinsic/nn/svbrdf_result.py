@@ -7,6 +7,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from tg_intrinsic.geometry.appearance.splat import splat_index
 from tg_intrinsic.utils import atomic_write
 
 # What each map is, for figures and colour-mapped exports: a title, the
@@ -127,7 +128,7 @@ class SVBRDFResult:
         when :obj:`face` is given (rasterised,
         :func:`~tg_intrinsic.geometry.appearance.raster.rasterize`, values
         interpolated by the barycentrics), else as splats as wide as the
-        point spacing (:func:`~tg_intrinsic.io.figures.splat_index`); the
+        point spacing (:func:`~tg_intrinsic.geometry.appearance.splat.splat_index`); the
         background is black.
 
         Args:
@@ -353,7 +354,6 @@ def _point_map_pixels(pos, face, intrinsics, extrinsics, image_size):
     on the background."""
     from tg_intrinsic.geometry.appearance.cameras import look_at_cameras
     from tg_intrinsic.geometry.appearance.raster import rasterize
-    from tg_intrinsic.io.figures import splat_index
     if pos is None:
         raise ValueError("saving point maps as images needs 'pos' (and "
                          "optionally one camera and the faces); texel maps "

@@ -8,6 +8,7 @@ from tg_intrinsic.geometry import knn
 from tg_intrinsic.geometry.appearance.cameras import (camera_centers, project,
                                                       sample_images,
                                                       splat_depth)
+from tg_intrinsic.geometry.appearance.dynamic_range import looks_clipped
 from tg_intrinsic.geometry.checks import (check_cameras, check_points,
                                           check_positive_float, check_tensor)
 from tg_intrinsic.surface_attributes import given_normals
@@ -105,7 +106,6 @@ class ProjectViews(GraphTransform):
             raise ValueError("'images' hold infinite or negative radiance; "
                              "linear HDR photographs must be finite and >= 0 "
                              "(mark missing pixels as NaN)")
-        from tg_intrinsic.io.hdr import looks_clipped
         if looks_clipped(images):
             warnings.warn("the images look 8-bit or clipped (values on a "
                           "1/255 grid or piled up at their maximum); the "

@@ -34,7 +34,8 @@ API_PAGES = {
     'solvers': ['tg_intrinsic.solvers'],
     'datasets': ['tg_intrinsic.datasets', 'tg_intrinsic.datasets.capture'],
     'io': ['tg_intrinsic.io', 'tg_intrinsic.io.scene', 'tg_intrinsic.io.gltf'],
-    'train and protocols': ['tg_intrinsic.train', 'tg_intrinsic.protocols',
+    'train and protocols': ['tg_intrinsic.train', 'tg_intrinsic.training',
+                            'tg_intrinsic.protocols',
                             'tg_intrinsic.devices',
                             'tg_intrinsic.distributed'],
 }

@@ -5,7 +5,8 @@ so these run on any machine."""
 import pytest
 import torch
 
-import tg_intrinsic.train as train_module
+import tg_intrinsic.training.loop as training_loop
+import tg_intrinsic.training.prepare as training_prepare
 from tg_intrinsic import distributed
 from tg_intrinsic.cli import main
 from tg_intrinsic.cli.common import UsageError
@@ -75,11 +76,11 @@ def test_train_takes_its_share_of_the_cores(monkeypatch, tmp_path):
     # three trainings at once each took every core
     threads = []
     monkeypatch.setattr(torch, 'set_num_threads', threads.append)
-    monkeypatch.setattr(train_module, 'default_threads', lambda: 3)
+    monkeypatch.setattr(training_loop, 'default_threads', lambda: 3)
 
     def stop(args):
         raise UsageError('stopped')
-    monkeypatch.setattr(train_module, 'source_splits', stop)
+    monkeypatch.setattr(training_prepare, 'source_splits', stop)
     argv = ['train', 'deltanet', '--quiet', '--out', str(tmp_path / 'a')]
     assert main(argv) == 2 and threads == [3]
     assert main(argv + ['--threads', '5']) == 2 and threads[-1] == 5

@@ -6,17 +6,11 @@ import torch
 from torch_geometric.loader import DataLoader
 
 import tg_intrinsic.train as train_module
+import tg_intrinsic.training.loop as training_loop
 from tg_intrinsic.cli.common import UsageError
 from tg_intrinsic.train import main, parse_args
 
-TINY = ['--dataset', 'synthetic_modelnet', '--num-points', '96',
-        '--shapes-per-class', '4', '--batch-size', '8', '--conv-channels',
-        '8', '8', '--k', '8', '--eval-every', '1', '--quiet']
-
-
-def run(tmp_path, *extra, root=None, out=None):
-    return main(TINY + ['--root', str(root or tmp_path / 'data'), '--out',
-                        str(out or tmp_path / 'run'), *extra])
+from tests.training import TINY, run
 
 
 def rescored_accuracy(metrics):
@@ -177,11 +171,11 @@ def test_resumed_run_equals_an_uninterrupted_one(tmp_path, modelnet_root,
         if history[-1]['epoch'] == 1:  # its checkpoint is written
             raise Killed
 
-    monkeypatch.setattr(train_module, 'plot_history', killed_after_epoch_1)
+    monkeypatch.setattr(training_loop, 'plot_history', killed_after_epoch_1)
     with pytest.raises(Killed):
         run(tmp_path, '--epochs', '3', *RANDOM, root=modelnet_root,
             out=tmp_path / 'resumed')
-    monkeypatch.setattr(train_module, 'plot_history', plot)
+    monkeypatch.setattr(training_loop, 'plot_history', plot)
     assert checkpoint(tmp_path / 'resumed')['epoch'] == 1
     metrics = run(tmp_path, '--epochs', '3', '--resume', *RANDOM,
                   root=modelnet_root, out=tmp_path / 'resumed')
@@ -204,13 +198,6 @@ def test_resuming_an_old_checkpoint(tmp_path, modelnet_root, recwarn):
     assert [h['epoch'] for h in metrics['history']] == [1, 2]
     assert not [w for w in recwarn if 'generator' in str(w.message)]
 
-
-def test_mesh_folder_needs_a_root(tmp_path):
-    with pytest.raises(ValueError, match='--mesh-root'):
-        main(['--dataset', 'mesh_folder', '--out', str(tmp_path),
-              '--epochs', '1', '--quiet'])
-    with pytest.raises(SystemExit):
-        parse_args(['--epochs', '0'])
 
 
 def test_training_on_a_mesh_folder(tmp_path):
@@ -286,70 +273,6 @@ def test_hsn_training_on_a_mesh_folder(tmp_path):
     assert metrics['dataset'] == 'mesh_folder'
 
 
-def test_unsupported_combinations_fail_before_reading_data(tmp_path, capsys):
-    with pytest.raises(SystemExit) as exit_info:
-        parse_args(['--model', 'hsn', '--dataset', 'synthetic_modelnet',
-                    '--root', str(tmp_path / 'data')])
-    assert exit_info.value.code == 2
-    message = capsys.readouterr().err
-    assert 'hsn classification cannot train on synthetic_modelnet' in message
-    assert 'hsn classification: synthetic_shrec, mesh_folder' in message
-    with pytest.raises(SystemExit):
-        parse_args(['--model', 'deltanet', '--task', 'segmentation',
-                    '--dataset', 'synthetic_modelnet'])
-    with pytest.raises(SystemExit):
-        parse_args(['--model', 'deltanet', '--protocol', 'hsn-shrec11'])
-    assert not (tmp_path / 'data').exists()
-
-
-def test_protocol_defaults_and_overrides():
-    from tg_intrinsic.protocols import PROTOCOLS
-    args = parse_args(['--model', 'hsn'])
-    hsn = PROTOCOLS['hsn-shrec11']
-    assert args.protocol == 'hsn-shrec11'
-    assert (args.lr, args.optimizer, args.batch_size, args.schedule) == \
-        (hsn.lr, hsn.optimizer, hsn.batch_size, hsn.schedule)
-    assert args.milestones == list(hsn.milestones) and args.rotate == 'xyz'
-    args = parse_args(['--model', 'hsn', '--lr', '0.5', '--rotate'])
-    assert args.lr == 0.5 and args.rotate == 'so3'
-    args = parse_args(['--protocol', 'deltanet-shrec11',
-                       '--no-anisotropic'])
-    shrec = PROTOCOLS['deltanet-shrec11']
-    assert (args.num_points, args.conv_channels, args.train_per_class) == \
-        (shrec.num_points, list(shrec.conv_channels), 10)
-    assert args.anisotropic is False
-    args = parse_args(['--model', 'hsn', '--task', 'segmentation'])
-    assert args.protocol == 'hsn-human-seg'
-    assert args.resample_vertices == 1024
-
-
-def test_select_per_class_is_seeded_and_balanced():
-    from tg_intrinsic.train import select_per_class
-    labels = [0] * 16 + [1] * 16 + [2] * 3
-    first = select_per_class(labels, 10, seed=4)
-    assert first == select_per_class(labels, 10, seed=4)
-    assert first != select_per_class(labels, 10, seed=5)
-    counts = torch.bincount(torch.tensor(labels)[first])
-    assert counts.tolist() == [10, 10, 3]
-
-
-def test_test_points_are_the_same_on_every_preparation(tmp_path):
-    # A checkpoint must score the same every time: the sampling of a
-    # shape depends on the data seed and the shape only.
-    from tg_intrinsic.train import build_point_sets
-    argv = ['--dataset', 'synthetic_shrec', '--root', str(tmp_path),
-            '--num-points', '64', '--shapes-per-class', '2',
-            '--num-vertices', '120', '160', '--k', '8']
-    first = build_point_sets(parse_args(argv))[1]
-    for folder in tmp_path.glob('deltanet_cache'):
-        for f in folder.iterdir():
-            f.unlink()
-    again = build_point_sets(parse_args(argv))[1]
-    other = build_point_sets(parse_args(argv + ['--data-seed', '1']))[1]
-    for a, b in zip(first, again):
-        torch.testing.assert_close(a.pos, b.pos)
-        torch.testing.assert_close(a.grad_weight, b.grad_weight)
-    assert not torch.allclose(first[0].pos, other[0].pos)
 
 
 def test_deltanet_segmentation_on_synthetic_shrec(tmp_path, shrec_root):
@@ -484,14 +407,6 @@ def test_resuming_an_hsn_checkpoint_of_another_normalisation(
     assert [h['epoch'] for h in metrics['history']] == [1, 2]
 
 
-def test_batches_for_batch_statistics_never_hold_a_lone_shape():
-    from tg_intrinsic.train import whole_batches
-    assert whole_batches(5, 4) == [[0, 1, 2, 3, 4]]
-    assert whole_batches(9, 4) == [[0, 1, 2, 3], [4, 5, 6, 7, 8]]
-    assert whole_batches(8, 4) == [[0, 1, 2, 3], [4, 5, 6, 7]]
-    assert whole_batches(3, 8) == [[0, 1, 2]]
-    assert whole_batches(3, 1) == [[0], [1], [2]]
-
 
 def test_compiled_and_mixed_precision_training(tmp_path, modelnet_root):
     # without dropout (whose random numbers differ once compiled), a
@@ -515,15 +430,3 @@ def test_compiled_and_mixed_precision_training(tmp_path, modelnet_root):
     with pytest.raises(UsageError, match='precision'):
         run(tmp_path, *common, '--resume', root=modelnet_root,
             out=tmp_path / 'bf16')
-
-
-def test_a_second_run_into_the_same_out_stops_at_once(tmp_path):
-    from tg_intrinsic.io.results import output_lock
-    out = tmp_path / 'run'
-    with output_lock(str(out)):   # another run holds it
-        with pytest.raises(ValueError, match=r"--out '.*run' is being "
-                           r"written by another run of tg-intrinsic"):
-            run(tmp_path, '--epochs', '1')
-    assert not out.exists()
-    run(tmp_path, '--epochs', '1')   # free again
-    assert (out / 'checkpoint.pt').exists()

@@ -148,7 +148,8 @@ import shutil  # noqa: E402
 
 import torch  # noqa: E402
 
-import tg_intrinsic.train as train_module  # noqa: E402
+import tg_intrinsic.training.loop as training_loop  # noqa: E402
+import tg_intrinsic.training.prepare as training_prepare  # noqa: E402
 from tg_intrinsic.cli.common import UsageError  # noqa: E402
 from tg_intrinsic.io.results import recorded_files  # noqa: E402
 
@@ -188,7 +189,7 @@ def no_data(monkeypatch):
     reaches it, one that fails comes before it."""
     def stop(args):
         raise UsageError(STOPPED)
-    monkeypatch.setattr(train_module, 'source_splits', stop)
+    monkeypatch.setattr(training_prepare, 'source_splits', stop)
 
 
 def test_a_run_records_its_files(finished):
@@ -369,7 +370,7 @@ def test_quiet_generates_the_data_without_a_progress_bar(
         capsys, tmp_path, monkeypatch):
     def stop(*args, **kwargs):
         raise UsageError(STOPPED)
-    monkeypatch.setattr(train_module, '_prepare_all', stop)
+    monkeypatch.setattr(training_prepare, '_prepare_all', stop)
     code, _, err = run_cli(capsys, 'train', 'deltanet', *TINY, '--quiet',
                            '--root', tmp_path / 'data', '--out',
                            tmp_path / 'run')
@@ -401,8 +402,8 @@ def test_the_error_is_not_printed_inside_the_progress_bar(
             self.kept.append(iteration)
             return iteration
 
-    monkeypatch.setattr(train_module, 'tqdm', KeptBar)
-    monkeypatch.setattr(train_module, 'build_model',
+    monkeypatch.setattr(training_loop, 'tqdm', KeptBar)
+    monkeypatch.setattr(training_loop, 'build_model',
                         lambda *args, **kwargs: _Failing())
     code, _, err = run_cli(capsys, 'train', 'deltanet', *TINY, '--root',
                            finished[0], '--out', tmp_path / 'run')
@@ -433,7 +434,7 @@ def test_resume_on_data_of_another_number_of_classes(capsys, tmp_path,
 
     def stop(*args, **kwargs):
         raise UsageError(STOPPED)
-    monkeypatch.setattr(train_module, '_prepare_all', stop)
+    monkeypatch.setattr(training_prepare, '_prepare_all', stop)
     code, _, err = run_cli(capsys, *argv, '--epochs', '1', '--resume')
     assert_user_error(code, err, 'train', 'trained on 2 classes, but the '
                       'data set has 3')

@@ -12,7 +12,7 @@ from typing import Iterable, Optional
 
 from tqdm.auto import tqdm
 
-from tg_intrinsic.errors import UsageError, one_line  # noqa: F401
+from tg_intrinsic.errors import UsageError, one_line  # noqa: F401 (re-exported)
 from tg_intrinsic.utils import os_error_reason
 
 

@@ -140,7 +140,9 @@ def baseline_accuracies(train_set, test_set, spectrum: bool) -> dict:
 def learning_part(model: str, args, out: str) -> dict:
     """Trains ``model`` with the library's training loop and compares it
     with the baselines on the same test shapes."""
-    from tg_intrinsic.train import parse_args, source_splits, train
+    from tg_intrinsic.training.loop import train
+    from tg_intrinsic.training.options import parse_args
+    from tg_intrinsic.training.sources import source_splits
     from tg_intrinsic.io.figures import line_figure
     dataset = 'synthetic_modelnet' if model == 'deltanet' else \
         'synthetic_shrec'

@@ -71,7 +71,7 @@ KINDS = {
 def add_arguments(parser):
     from tg_intrinsic.geometry.geodesics.logmap import METHODS
     from tg_intrinsic.geometry.pointcloud.mls import MIN_MLS_NEIGHBOURS
-    from tg_intrinsic.train import hsn_pipeline
+    from tg_intrinsic.training.prepare import hsn_pipeline
     from tg_intrinsic.transforms import (EstimateNormals, GravoHierarchy,
                                          MLSOperators)
     kinds = parser.add_subparsers(dest='kind', metavar='KIND', required=True,
@@ -179,7 +179,7 @@ def transform_of(kind: str, settings: Dict):
         return Compose(steps + [LogMap(settings['radius'],
                                        method=settings['method'])])
     if kind == 'hsn':
-        from tg_intrinsic.train import hsn_pipeline
+        from tg_intrinsic.training.prepare import hsn_pipeline
         return hsn_pipeline(settings['radius'], settings['rings'],
                             settings['max_order'], settings['method'])
     if kind == 'gravo':

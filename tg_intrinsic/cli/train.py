@@ -46,7 +46,8 @@ SYNTHETIC = {'synthetic-modelnet': 'synthetic_modelnet',
 
 
 def add_arguments(parser):
-    from tg_intrinsic.train import MODELS, add_arguments as training
+    from tg_intrinsic.training.options import add_arguments as training
+    from tg_intrinsic.training.sources import MODELS
     parser.add_argument('model', choices=MODELS,
                         help='deltanet (point clouds) or hsn (meshes)')
     parser.add_argument('--dataset', default=None,
@@ -61,7 +62,8 @@ def add_arguments(parser):
 
 
 def run(args):
-    from tg_intrinsic.train import check_arguments, train
+    from tg_intrinsic.training.loop import train
+    from tg_intrinsic.training.options import check_arguments
     from .common import UsageError
     name = (args.dataset or '').replace('_', '-')
     if args.dataset is None:

@@ -1,0 +1,32 @@
+"""The training loop: a small run keeps the figures it had before train.py
+became a package (losses and accuracies to the last bit), and a batch
+norm over shapes refuses batches of one shape."""
+from tg_intrinsic.training.loop import lone_shape_batches
+from tests.training import run
+
+#: train's history of ``run(tmp_path, '--epochs', '2')``, recorded with the
+#: single-module train.py before the split (issue 41)
+PINNED = [
+    {'epoch': 1, 'train_loss': 2.746223052342733,
+     'train_accuracy': 0.08333333333333333,
+     'test_accuracy': 0.2916666666666667,
+     'test_accuracy_batch_statistics': 0.25},
+    {'epoch': 2, 'train_loss': 2.6953802903493247,
+     'train_accuracy': 0.20833333333333334,
+     'test_accuracy': 0.20833333333333334,
+     'test_accuracy_batch_statistics': 0.25},
+]
+
+
+def test_a_small_run_keeps_its_figures(tmp_path):
+    metrics = run(tmp_path, '--epochs', '2')
+    history = [{key: record[key] for key in PINNED[0]}
+               for record in metrics['history']]
+    assert history == PINNED
+    assert metrics['final_test_accuracy'] == PINNED[-1]['test_accuracy']
+
+
+def test_lone_shape_batches():
+    assert lone_shape_batches('deltanet', 8, 1, 16) is None
+    said = lone_shape_batches('deltanet', 1, 1, 16)
+    assert said and '--batch-size' in said

@@ -63,9 +63,9 @@ def test_a_mesh_folder_as_dataset(tmp_path, capsys):
 def trained(monkeypatch):
     """The arguments ``tg-intrinsic train`` hands to the library's train()
     (which is not run)."""
-    import tg_intrinsic.train
+    import tg_intrinsic.training.loop
     calls = []
-    monkeypatch.setattr(tg_intrinsic.train, 'train', calls.append)
+    monkeypatch.setattr(tg_intrinsic.training.loop, 'train', calls.append)
     return calls
 
 

@@ -39,6 +39,8 @@ extras_require = {
         # svbrdf --texture: a UV atlas, and a glTF reader that is not ours
         'xatlas>=0.0.9',
         'pygltflib>=1.16',
+        # a reader of COLMAP models that is not ours (tests/io/test_colmap.py)
+        'pycolmap>=3.10; python_version >= "3.10"',
         # the wheel as users get it (tests/test_packaging.py; built without
         # isolation, so with this environment's setuptools)
         'build>=1.0',

@@ -160,7 +160,7 @@ def test_bad_input_is_one_line_with_exit_code_2(scene, tmp_path, capsys):
     (tmp_path / 'empty').mkdir()
     assert run(['svbrdf', str(tmp_path / 'empty'), '--out',
                 str(tmp_path / 'o')]) == 2
-    one_line_error(capsys, 'has no cameras.json')
+    one_line_error(capsys, 'no capture this library reads', 'no cameras.json')
     # one camera fewer than photographs
     copy = tmp_path / 'copy'
     shutil.copytree(scene, copy)
@@ -184,7 +184,7 @@ def test_bad_input_is_one_line_with_exit_code_2(scene, tmp_path, capsys):
     assert run(['svbrdf', str(scene), '--metallic', '2']) == 2
     one_line_error(capsys, '--metallic', 'must lie in [0, 1]')
     assert run(['svbrdf']) == 2
-    one_line_error(capsys, 'give a SCENE_DIR')
+    one_line_error(capsys, 'give a CAPTURE')
     assert run(['svbrdf', str(scene), '--write-example', str(tmp_path)]) \
         == 2
     one_line_error(capsys, 'not both')

@@ -714,3 +714,24 @@ def test_write_ply_keeps_the_types_of_typed_properties(tmp_path):
                                          "'red'"):
         mf.write_ply(str(path), V, F, colors=np.zeros((n, 3)),
                      typed_properties={'red': typed['red']})
+
+
+def test_obj_normals_are_read_when_each_vertex_has_one(tmp_path):
+    from tg_intrinsic.io import read_surface
+    smooth = tmp_path / 'smooth.obj'
+    smooth.write_text('v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n'
+                      'vn 0 0 1\nvn 0 1 0\nvn 1 0 0\nvn 0.6 0.8 0\n'
+                      'f 1//1 2//2 3//3\nf 1/1/1 3/1/3 4/1/4\n'
+                      'vt 0 0\n')
+    pos, face, properties = read_surface(str(smooth))
+    normal = np.stack([properties[k] for k in ('nx', 'ny', 'nz')], 1)
+    assert np.array_equal(normal, [[0, 0, 1], [0, 1, 0], [1, 0, 0],
+                                   [0.6, 0.8, 0]])
+    # flat shading: vertex 1 has two normals; a corner without one
+    for faces in ('f 1//1 2//2 3//3\nf 1//2 3//3 4//4\n',
+                  'f 1//1 2//2 3//3\nf 1 3 4\n'):
+        flat = tmp_path / 'flat.obj'
+        flat.write_text('v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n'
+                        'vn 0 0 1\nvn 0 1 0\nvn 1 0 0\nvn 0.6 0.8 0\n'
+                        + faces)
+        assert read_surface(str(flat))[2] == {}

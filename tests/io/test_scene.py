@@ -264,9 +264,10 @@ def test_bad_envmap(scene, envmap, message):
         read_scene(scene)
 
 
-def test_envmap_not_twice_as_wide_warns(scene):
+def test_envmap_not_twice_as_wide_is_refused(scene):
     np.save(scene / 'envmap.npy', np.ones((8, 8, 3), np.float32) * 0.3)
-    with pytest.warns(UserWarning, match=r"envmap.npy' is 8 x 8"):
+    with pytest.raises(ValueError, match=r"envmap.npy' is 8 x 8 pixels; an "
+                       r"equirectangular .* twice as wide as high"):
         read_scene(scene)
 
 

@@ -32,7 +32,7 @@ import sys
 import time
 
 from .common import (UsageError, default_of, stage, nonnegative_float,
-                     nonnegative_int, positive_int)
+                     nonnegative_int, positive_float, positive_int)
 
 HELP = 'recover SVBRDF maps and their uncertainty from HDR photographs'
 
@@ -61,9 +61,41 @@ EXAMPLE = f"""examples:
   tg-intrinsic svbrdf scene --texture 512       # + textures and svbrdf.glb
   tg-intrinsic svbrdf scene --refine 0 --solver adam   # the paper's method
   tg-intrinsic svbrdf my_capture --metallic 1 --tv-weight 0.01 --device cuda
+  tg-intrinsic svbrdf colmap_project --geometry mesh.ply --envmap sky.exr \
+      --exposure 0.5 --up y     # COLMAP + JPEGs, y-up world
+  tg-intrinsic svbrdf --write-example cap --format nerfstudio --ldr
 
-the scene folder (SCENE_DIR):
+captures (CAPTURE), recognised in this order:
+  SCENE/cameras.json          the native scene folder (below)
+  Stanford-ORB                ROOT/blender_HDR/<scene> or ROOT/<scene>
+  transforms.json             NeRF/Blender (camera_angle_x, OpenGL poses)
+                              or nerfstudio (fl_x fl_y cx cy w h, k1 k2 p1
+                              p2, mask_path); also transforms_train.json
+  COLMAP model                cameras/images/points3D .txt or .bin, in
+                              CAPTURE, CAPTURE/sparse/0 or CAPTURE/sparse,
+                              photographs in CAPTURE/images/, masks in
+                              CAPTURE/masks/ (optional)
+  Photographs: linear HDR (.exr, .hdr) or 8-bit (PNG, JPEG: --exposure).
+  Pixel centres: COLMAP's, NeRF's and nerfstudio's cx, cy are used as
+  they are (centres at half-integers); NeRF's principal point is (W/2,
+  H/2). Without --geometry/--envmap the format's files are used, else the
+  one mesh and the one .exr/.hdr file in the capture folder.
+
+the scene folder (native format):
 {_indent(_scene_format())}"""
+
+
+def _degrees(text: str) -> float:
+    """argparse type of --envmap-rotation: a finite number of degrees."""
+    import argparse
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of degrees, got "
+                                         f"{text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    return value
 
 
 def _unit_float(text: str) -> float:
@@ -113,11 +145,47 @@ def add_arguments(parser):
     tv_weight = default_of(FrequencySVBRDF.recover, 'tv_weight')
     l_max_type = _l_max_type(default_of(FitSphericalHarmonics.__init__,
                                         'num_light_samples'))
-    parser.add_argument('scene', nargs='?', metavar='SCENE_DIR',
-                        help='the scene folder (format below)')
+    from tg_intrinsic.io.capture import CAPTURE_FORMATS
+    from tg_intrinsic.io.capture_writer import WRITE_FORMATS
+    from tg_intrinsic.io.capture_views import UP_AXES
+    parser.add_argument('scene', nargs='?', metavar='CAPTURE',
+                        help='the capture: a scene folder (format below), a '
+                        'COLMAP model with images/, a transforms.json '
+                        '(NeRF/Blender or nerfstudio) or a Stanford-ORB '
+                        'scene; the format is recognised (--format)')
     parser.add_argument('--out', default=None, metavar='DIR',
-                        help='output folder (default: runs/svbrdf_<SCENE_DIR'
+                        help='output folder (default: runs/svbrdf_<CAPTURE'
                         ' name>)')
+    capture = parser.add_argument_group(
+        'captures', 'what a capture format has no place for')
+    capture.add_argument('--format', default=None, choices=sorted(
+        set(CAPTURE_FORMATS) | set(WRITE_FORMATS)),
+        help='the capture\'s format (default: recognised from the folder);'
+        ' with --write-example, the format to write (default: native)')
+    capture.add_argument('--geometry', default=None, metavar='MESH',
+                         help='the surface (OBJ, OFF, PLY, STL), in the '
+                         'cameras\' world (default: the format\'s, else '
+                         'the one mesh file in the capture folder)')
+    capture.add_argument('--envmap', default=None, metavar='MAP',
+                         help='the lighting, an equirectangular .exr/.hdr '
+                         '(default: the format\'s, else the one such file '
+                         'in the capture folder)')
+    capture.add_argument('--exposure', type=positive_float, default=None,
+                         metavar='S', help='8-bit photographs: decoded '
+                         'values are S times the radiance of the '
+                         'environment map\'s units (required for LDR '
+                         'photographs; EXIF exposures, where every '
+                         'photograph has one, scale each relative to the '
+                         'first)')
+    capture.add_argument('--gamma', type=positive_float, default=None,
+                         metavar='G', help='decode 8-bit photographs as '
+                         'value^G instead of the sRGB curve')
+    capture.add_argument('--envmap-rotation', type=_degrees, default=0.0,
+                         metavar='DEGREES', help='turn the lighting about '
+                         'world up (default: 0)')
+    capture.add_argument('--up', choices=UP_AXES, default='z',
+                         help='the up axis of the capture\'s world; y is '
+                         'turned to the library\'s z (default: z)')
     parser.add_argument('--overwrite', action='store_true',
                         help='write into --out (or --write-example DIR) even '
                         'when it holds files that svbrdf did not write: '
@@ -206,6 +274,9 @@ def add_arguments(parser):
                          default=None, metavar='S', help=f'icosphere '
                          f'subdivisions, 10 * 4^S + 2 vertices (default: '
                          f'{EXAMPLE_SUBDIVISIONS}: 642)')
+    example.add_argument('--ldr', action='store_true',
+                         help='write 8-bit sRGB PNG photographs (not with '
+                         '--format native)')
     example.add_argument('--seed', type=nonnegative_int, default=0,
                          help='of the example\'s materials and sun '
                          '(default: 0)')
@@ -216,7 +287,7 @@ def run(args):
                        args.example_subdivisions)
     if args.write_example is not None:
         if args.scene is not None:
-            raise UsageError("give either SCENE_DIR (to recover maps) or "
+            raise UsageError("give either CAPTURE (to recover maps) or "
                              "--write-example DIR (to write a scene), not "
                              "both")
         # options of the recovery would be ignored without a word
@@ -224,7 +295,11 @@ def run(args):
             ('--out', args.out), ('--steps', args.steps),
             ('--l-max', args.l_max), ('--metallic', args.metallic),
             ('--solver', args.solver), ('--refine', args.refine),
-            ('--texture', args.texture),
+            ('--texture', args.texture), ('--geometry', args.geometry),
+            ('--envmap', args.envmap), ('--exposure', args.exposure),
+            ('--gamma', args.gamma),
+            ('--envmap-rotation', args.envmap_rotation or None),
+            ('--up', None if args.up == 'z' else args.up),
             ('--visibility', None if args.visibility == VISIBILITY[0]
              else args.visibility)) if value is not None]
         if given:
@@ -235,27 +310,37 @@ def run(args):
                 f"stops; drop {'it' if one else 'them'} and recover its maps "
                 f"afterwards with 'tg-intrinsic svbrdf DIR --out OUT'")
         return write_example(args)
-    if any(option is not None for option in example_options):
-        raise UsageError("--example-views, --example-image-size and "
-                         "--example-subdivisions only go with "
+    if any(option is not None for option in example_options) or args.ldr:
+        raise UsageError("--example-views, --example-image-size, "
+                         "--example-subdivisions and --ldr only go with "
                          "--write-example DIR")
+    if args.format == 'colmap-bin':
+        args.format = 'colmap'  # read: text and binary models alike
     if args.scene is None:
-        raise UsageError("give a SCENE_DIR (see 'tg-intrinsic svbrdf --help' "
-                         "for its format) or --write-example DIR")
+        raise UsageError("give a CAPTURE (a scene folder, a COLMAP model, a "
+                         "transforms.json or a Stanford-ORB scene; see "
+                         "'tg-intrinsic svbrdf --help') or --write-example "
+                         "DIR")
     return recover(args)
 
 
 # ------------------------------------------------------------------ example
 def write_example(args) -> int:
-    """Writes the synthetic scene folder of ``--write-example``."""
+    """Writes the synthetic scene of ``--write-example`` in ``--format``."""
     import numpy as np
     from tg_intrinsic.datasets import svbrdf_scene
-    from tg_intrinsic.io import scene_summary, write_scene
+    from tg_intrinsic.io import scene_summary
+    from tg_intrinsic.io.capture_writer import write_capture
     from tg_intrinsic.io.results import result_folder
     from tg_intrinsic.io.scene import FORMAT, GROUND_TRUTH_FILE
     from tg_intrinsic.utils import atomic_write
 
     folder = args.write_example
+    form = args.format or 'native'
+    if args.ldr and form == 'native':
+        raise UsageError("--ldr writes 8-bit photographs, which a native "
+                         "scene folder does not hold; add --format colmap, "
+                         "nerf, nerfstudio or orb")
     views = args.example_views or EXAMPLE_VIEWS
     size = args.example_image_size or EXAMPLE_IMAGE_SIZE
     subdivisions = EXAMPLE_SUBDIVISIONS if args.example_subdivisions is None \
@@ -270,23 +355,32 @@ def write_example(args) -> int:
         data = svbrdf_scene('sphere', num_views=views,
                             image_size=(size, size), materials='metals',
                             seed=args.seed, resolution=subdivisions)
-        write_scene(staging, data)
+        written = write_capture(staging, data, form, ldr=args.ldr)
+        capture = os.path.relpath(written['capture'], staging)
         truth = {name: getattr(data, name).detach().cpu().numpy()
                  for name in ('base_color', 'metallic', 'roughness', 'pos')}
-        atomic_write(os.path.join(staging, GROUND_TRUTH_FILE),
+        atomic_write(os.path.join(written['capture'], GROUND_TRUTH_FILE),
                      lambda f: np.savez(f, **truth), 'wb')
+        path = os.path.normpath(os.path.join(folder, capture))
+        command = _recover_command(path, form, written['exposure'])
         readme = ('A synthetic scene written by "tg-intrinsic svbrdf '
                   '--write-example" (tg_intrinsic.datasets.svbrdf_scene: '
-                  f'metals under a sun and sky, seed {args.seed}).\n'
-                  f'Recover its maps with: tg-intrinsic svbrdf {folder} '
-                  f'--out OUT\n\n{FORMAT}\n')
+                  f'metals under a sun and sky, seed {args.seed}), in the '
+                  f'{form} format'
+                  f'{" with 8-bit photographs" if args.ldr else ""}.\n'
+                  f'Recover its maps with: {command}\n'
+                  + (f'\n{FORMAT}\n' if form == 'native' else ''))
         atomic_write(os.path.join(staging, 'README.txt'),
                      lambda f: f.write(readme), 'w')
     if not args.quiet:
-        print(f"wrote {folder}: {scene_summary(data)}, with "
-              f"{GROUND_TRUTH_FILE}\nnext: tg-intrinsic svbrdf {folder} "
-              f"--out OUT")
+        print(f"wrote {folder}: {scene_summary(data)}, in the {form} "
+              f"format, with {GROUND_TRUTH_FILE}\nnext: {command}")
     return 0
+
+
+def _recover_command(path: str, form: str, exposure) -> str:
+    exposure = '' if exposure is None else f' --exposure {exposure:.9g}'
+    return f"tg-intrinsic svbrdf {path}{exposure} --out OUT"
 
 
 # ------------------------------------------------------------------ recovery
@@ -294,15 +388,14 @@ def recover(args) -> int:
     """Reads the scene, recovers the maps and writes the outputs."""
     import torch
 
-    from tg_intrinsic.io import read_scene
     from tg_intrinsic.devices import resolve_device
+    from tg_intrinsic.io.capture import read_capture
     from tg_intrinsic.io.results import check_output_path, result_folder
     from tg_intrinsic.io.scene import GROUND_TRUTH_FILE, scene_files
 
     device = resolve_device(args.device, '--device')
     dtype = getattr(torch, args.dtype)
     scene = args.scene
-    truth_path = os.path.join(scene, GROUND_TRUTH_FILE)
     out = args.out if args.out is not None else os.path.join(
         'runs', 'svbrdf_' + os.path.basename(os.path.normpath(
             os.path.abspath(scene))))
@@ -310,25 +403,34 @@ def recover(args) -> int:
     seconds = {}
     start = time.perf_counter()
     # read without a progress line: a bad scene is reported on one line
-    data = read_scene(scene, dtype=dtype)
+    data = read_capture(scene, args.format, dtype=dtype,
+                        geometry=args.geometry, envmap=args.envmap,
+                        exposure=args.exposure, gamma=args.gamma,
+                        envmap_rotation=args.envmap_rotation, up=args.up)
+    capture = data.capture_info
+    del data.capture_info
+    truth_path = os.path.join(capture['folder'], GROUND_TRUTH_FILE)
     truth = _read_ground_truth(truth_path, data.pos) \
         if os.path.lexists(truth_path) else None
+    inputs = [scene, truth_path, capture['folder']] + (
+        scene_files(capture['folder']) if capture['format'] == 'native'
+        else [capture['geometry'], capture['envmap']])
     seconds['read'] = round(time.perf_counter() - start, 3)
     if args.texture is not None:
         _check_texture_inputs(data)
     # every file written goes to a staging folder, put in place only when
     # all are written; --out may not hold the scene (--out SCENE/images)
     with result_folder(out, 'svbrdf', args.overwrite,
-                       inputs=[scene, truth_path] + scene_files(scene)
-                       ) as staging:
+                       inputs=inputs) as staging:
         report = _recover(args, data, truth, device, seconds, start,
-                          staging)
+                          staging, capture)
     if not args.quiet:
         _print_summary(out, report)
     return 0
 
 
-def _recover(args, data, truth, device, seconds, start, out) -> dict:
+def _recover(args, data, truth, device, seconds, start, out,
+             capture: dict) -> dict:
     """Recovers the maps of the scene read into ``data`` and writes every
     output into ``out`` (the staging folder); returns the report."""
     import numpy as np
@@ -340,8 +442,8 @@ def _recover(args, data, truth, device, seconds, start, out) -> dict:
 
     scene = args.scene
     if not args.quiet:
-        print(f"read {scene}: {scene_summary(data)}", file=sys.stderr,
-              flush=True)
+        print(f"read {scene} ({capture['format']} capture): "
+              f"{scene_summary(data)}", file=sys.stderr, flush=True)
     model = FrequencySVBRDF(data.num_nodes,
                             specular_model=args.specular_model).to(device)
     refine = {None: 'auto', 0: False}.get(args.refine, True)
@@ -374,6 +476,7 @@ def _recover(args, data, truth, device, seconds, start, out) -> dict:
     face = getattr(data, 'face', None)
     report = {
         'scene': os.path.abspath(scene),
+        'capture': capture,
         'points': int(data.num_nodes),
         'triangles': None if face is None else int(face.size(1)),
         'views': int(data.images.size(0)),
@@ -578,7 +681,15 @@ def _write_outputs(out: str, data, result, maps: dict, name: str) -> list:
 def _print_summary(out: str, report: dict):
     seen = report['observations_per_point']
     pipeline, seconds = report['pipeline'], report['seconds']
+    capture = report['capture']
+    left_out = capture.get('pixels_left_out') or {}
+    dropped = ', '.join(f"{n} {why.replace('_', ' ')}"
+                        for why, n in left_out.items() if n)
     lines = [
+        f"{capture['format']} capture"
+        + ('' if not capture.get('ldr') else
+           f", 8-bit photographs at exposure {capture['exposure']:g}")
+        + (f"; pixels left out: {dropped}" if dropped else ''),
         f"{report['points']} points, {report['views']} views: "
         f"{seen['mean']:.1f} observations per point on average"
         + (f", {seen['unseen_points']} points unseen"

@@ -1,6 +1,8 @@
 """File input and output: HDR images and environment maps, meshes and
-point clouds with per-vertex properties, segmentation label files, and
-figures of values drawn on surfaces."""
+point clouds with per-vertex properties, segmentation label files,
+figures of values drawn on surfaces, and captures for SVBRDF recovery in
+the formats people have (the native scene folder, COLMAP, transforms.json,
+Stanford-ORB; HDR or LDR photographs, masks)."""
 from .hdr import read_hdr, write_hdr, read_exr, read_envmap, looks_clipped
 from .mesh import (read_face_uv, read_mesh, read_surface, read_off,
                    read_signal, write_ply)
@@ -10,6 +12,13 @@ from .labels import (read_labels, read_soft_labels, meshcnn_edges,
                      face_label_scores, edge_label_scores, check_labels,
                      to_int_labels)
 from .scene import read_scene, write_scene, scene_summary
+from .photographs import read_ldr, read_mask, exif_exposure, srgb_to_linear
+from .colmap import (read_colmap, read_colmap_model, write_colmap_model,
+                     camera_matrix)
+from .transforms_json import read_transforms
+from .stanford_orb import read_stanford_orb
+from .capture import CAPTURE_FORMATS, detect_format, read_capture
+from .capture_writer import write_capture
 
 __all__ = [
     'read_hdr',
@@ -37,4 +46,11 @@ __all__ = [
     'read_scene',
     'write_scene',
     'scene_summary',
+    'read_ldr', 'read_mask', 'exif_exposure', 'srgb_to_linear',
+    'read_colmap', 'read_colmap_model', 'write_colmap_model',
+    'camera_matrix',
+    'read_transforms',
+    'read_stanford_orb',
+    'CAPTURE_FORMATS', 'detect_format', 'read_capture',
+    'write_capture',
 ]

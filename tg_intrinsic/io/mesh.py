@@ -101,8 +101,11 @@ def read_surface(path: str, weld: bool = True, return_inverse: bool = False
     """Reads a mesh or a point cloud (OBJ, OFF, PLY binary or ASCII, STL):
     ``(pos [N, 3] float64, face [F, 3] int64 or None for a point cloud,
     properties)``, where ``properties`` holds the PLY vertex properties
-    other than ``x, y, z`` by name (``nx``, ``red``, ``quality``, ...;
-    empty for other formats).
+    other than ``x, y, z`` by name (``nx``, ``red``, ``quality``, ...),
+    an OBJ file's normals as ``nx ny nz`` when its faces give every vertex
+    one normal (``f v//vn`` corners, smooth shading; a vertex with several
+    normals, as flat shading stores them, leaves them out), and is empty
+    for other formats.
 
     The vertices as stored are those of the file, in its order: every
     ``v`` line of an OBJ file, whatever object, group or material it
@@ -146,6 +149,10 @@ def read_surface(path: str, weld: bool = True, return_inverse: bool = False
             pos, face = read_off(path)
         elif ext == '.obj':
             pos, face = read_obj(path)
+            normal = _obj_vertex_normals(path, len(pos), face)
+            if normal is not None:
+                properties = {k: normal[:, i]
+                              for i, k in enumerate(('nx', 'ny', 'nz'))}
         else:
             import trimesh
             loaded = _load_trimesh(path, ext)
@@ -448,6 +455,42 @@ def read_obj(path: str) -> Tuple[np.ndarray, Optional[np.ndarray]]:
     Raises a :class:`ValueError` that names the line of a malformed
     ``v`` or ``f`` line."""
     return _parse_obj(path)[:2]
+
+
+def _obj_vertex_normals(path: str, num_vertices: int, face
+                        ) -> Optional[np.ndarray]:
+    """The per-vertex normals ``[N, 3]`` an OBJ file's ``vn`` lines and
+    ``f v/vt/vn`` corners give, or :obj:`None` when it has none, a corner
+    without one, a vertex with two different normals or a vertex on no
+    face (then they are computed from the triangles)."""
+    if face is None:
+        return None
+    with open(path, 'r', encoding=TEXT_ENCODING, errors='replace') as f:
+        text = f.read()
+    if '\nvn ' not in text and not text.startswith('vn '):
+        return None
+    normals = re.findall(r'^\s*vn\s+(\S+)\s+(\S+)\s+(\S+)', text, re.M)
+    corners = re.findall(r'^\s*f\s+(.*)$', text, re.M)
+    pairs = [token.split('/') for row in corners
+             for token in row.split('#', 1)[0].split()]
+    if not normals or any(len(p) != 3 or not p[2] for p in pairs):
+        return None
+    try:
+        vn = np.array(normals, dtype=np.float64)
+        index = np.array([(int(p[0]), int(p[2])) for p in pairs],
+                         dtype=np.int64)
+    except ValueError:
+        return None
+    if (index <= 0).any() or index[:, 1].max() > len(vn) or \
+            index[:, 0].max() > num_vertices:
+        return None  # relative indices, or read_obj's errors
+    normal = np.full((num_vertices, 3), np.nan)
+    normal[index[:, 0] - 1] = vn[index[:, 1] - 1]
+    # one normal per vertex: every corner agrees with what was stored
+    if np.isnan(normal).any() or not np.allclose(
+            normal[index[:, 0] - 1], vn[index[:, 1] - 1], atol=1e-9):
+        return None
+    return normal
 
 
 def _parse_obj(path: str, with_lines: bool = False):

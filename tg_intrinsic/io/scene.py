@@ -12,8 +12,9 @@ world point to camera coordinates, the camera looks along :math:`+z_c` with
 :math:`(u, v) = (f_x x_c / z_c + c_x, f_y y_c / z_c + c_y)` in pixels
 where pixel (row :math:`i`, column :math:`j`) covers
 :math:`u \in [j, j + 1)`, :math:`v \in [i, i + 1)`: its centre is at
-:math:`(j + \frac12, i + \frac12)`. (OpenCV and COLMAP put pixel centres
-at integers: add 0.5 to their :math:`c_x, c_y`.) The environment map is
+:math:`(j + \frac12, i + \frac12)`. (OpenCV puts pixel centres at
+integers: add 0.5 to its :math:`c_x, c_y`; COLMAP's, NeRF's and
+nerfstudio's are at half-integers, as here.) The environment map is
 equirectangular with world :math:`z` up, as in
 :mod:`tg_intrinsic.geometry.appearance.envmap`. All radiance is linear: 8-bit
 or tone-mapped photographs are not HDR.
@@ -33,9 +34,12 @@ from torch_geometric.data import Data
 
 from tg_intrinsic.utils import atomic_write, atomic_write_file
 
-from .hdr import (looks_clipped, read_envmap, read_exr, read_hdr, read_npy,
-                  write_hdr)
-from .mesh import MESH_EXTENSIONS, read_face_uv, read_surface, write_ply
+from .capture_files import (ENVMAP_EXTENSIONS, HDR_EXTENSIONS,
+                            find_single_file, is_candidate,
+                            read_envmap_file, read_geometry_file,
+                            read_hdr_photograph, why_not_a_file)
+from .hdr import looks_clipped, write_hdr
+from .mesh import MESH_EXTENSIONS, write_ply
 
 __all__ = ['FORMAT', 'read_scene', 'write_scene', 'scene_summary',
            'scene_files']
@@ -75,23 +79,19 @@ keys are ignored. Without "geometry", SCENE must hold exactly one
 file besides the photographs. A folder of photographs must hold no
 photograph that cameras.json does not list. Cameras are OpenCV's
 (world-to-camera [R | t], +z forward, y down) with pixel centres at
-half-integers (add 0.5 to OpenCV's or COLMAP's cx, cy)."""
+half-integers (add 0.5 to OpenCV's cx, cy; COLMAP's are as here)."""
 
 __doc__ += '\n::\n\n' + '\n'.join(
     '    ' + line if line else '' for line in FORMAT.split('\n')) + '\n'
 
 CAMERAS_FILE = 'cameras.json'
 GROUND_TRUTH_FILE = 'ground_truth.npz'
-IMAGE_EXTENSIONS = ('.exr', '.hdr', '.pic', '.npy')
 IMAGE_FORMATS = ('exr', 'hdr', 'npy')
-LDR_EXTENSIONS = ('.png', '.jpg', '.jpeg', '.bmp', '.gif', '.webp')
 # what a file of each kind is written as by write_scene
 GEOMETRY_NAME = 'geometry.ply'
 IMAGE_FOLDER = 'images'
 # |R R^T - I| allowed in cameras.json: float32 round-off, not a shear
 ROTATION_TOLERANCE = 1e-4
-# neighbours for normals of point clouds stored without them
-NORMAL_NEIGHBOURS = 10
 _NUMBERED = re.compile(r'^\d{3,}\.(exr|hdr|npy)$')
 
 
@@ -133,8 +133,8 @@ def read_scene(folder, dtype: torch.dtype = torch.float32) -> Data:
             is missing or an unlisted one beside them, photographs of
             different sizes, without 3 channels, not floating point, or
             with infinite or negative radiance, no photograph with a pixel
-            above 0, an environment map of the wrong shape or black
-            everywhere, no geometry file or several candidates, and a
+            above 0, an environment map of the wrong shape (not
+            [H, 2 H, 3]) or black everywhere, no geometry file or several candidates, and a
             folder where a file belongs.
     """
     if dtype not in (torch.float32, torch.float64):
@@ -142,8 +142,10 @@ def read_scene(folder, dtype: torch.dtype = torch.float32) -> Data:
                          f"got {dtype}")
     folder = os.fspath(folder)
     spec, files, geometry, envmap_file = _locate(folder)
-    pos, face, normal, face_uv = _read_geometry(folder, geometry)
-    envmap = _read_envmap(folder, envmap_file)
+    named_in = f'named in {CAMERAS_FILE}'
+    pos, face, normal, face_uv = read_geometry_file(
+        _resolve(folder, geometry), named_in)
+    envmap = read_envmap_file(_resolve(folder, envmap_file), named_in)
     images = _read_images(folder, files)
     intrinsics = torch.as_tensor(np.stack([c['K'] for c in spec['cameras']]),
                                  dtype=dtype)
@@ -183,34 +185,17 @@ def _locate(folder: str):
     spec = _read_cameras_json(folder)
     files = [camera['image'] for camera in spec['cameras']]
     _check_image_folders(folder, files)
-    geometry = spec['geometry'] or _find_single(
-        folder, MESH_EXTENSIONS, set(), 'geometry',
-        'geometry (mesh or point cloud)')
-    envmap = spec['envmap'] or _find_single(
-        folder, ('.hdr', '.pic', '.exr', '.npy'), set(files), 'envmap',
-        'environment-map')
+    geometry = spec['geometry'] or find_single_file(
+        folder, MESH_EXTENSIONS, set(), 'geometry (mesh or point cloud)',
+        f'as "geometry" in {CAMERAS_FILE}')
+    envmap = spec['envmap'] or find_single_file(
+        folder, ENVMAP_EXTENSIONS, set(files), 'environment-map',
+        f'as "envmap" in {CAMERAS_FILE}')
     return spec, files, geometry, envmap
 
 
 def _resolve(folder: str, name: str) -> str:
     return name if osp.isabs(name) else osp.join(folder, name)
-
-
-def _why_not_a_file(path: str) -> Optional[str]:
-    """Why ``path`` is no file to read (to end a sentence that begins
-    with it), or :obj:`None` when it is one."""
-    if osp.isfile(path):
-        return None
-    if osp.isdir(path):
-        return 'is a folder, not a file'
-    if osp.islink(path):
-        return f"is a link to '{os.readlink(path)}', which does not exist"
-    parent = osp.dirname(osp.abspath(path))
-    while not osp.exists(parent) and osp.dirname(parent) != parent:
-        parent = osp.dirname(parent)
-    if osp.exists(parent) and not osp.isdir(parent):
-        return f"does not exist: '{parent}' is a file, not a folder"
-    return 'does not exist'
 
 
 def _read_cameras_json(folder: str) -> dict:
@@ -312,11 +297,6 @@ def _matrix(value, shape, name: str, where: str) -> np.ndarray:
     return array
 
 
-def _is_candidate(name: str, extensions) -> bool:
-    return not name.startswith('.') and \
-        osp.splitext(name)[1].lower() in extensions
-
-
 def _check_image_folders(folder: str, files: List[str]):
     """Every listed image exists, and a folder of images (other than the
     scene folder itself, which also holds the envmap) holds no unlisted
@@ -324,7 +304,7 @@ def _check_image_folders(folder: str, files: List[str]):
     listed = {}
     for i, name in enumerate(files):
         path = _resolve(folder, name)
-        why = _why_not_a_file(path)
+        why = why_not_a_file(path)
         if why:
             raise ValueError(f"camera {i} of '{osp.join(folder, CAMERAS_FILE)}"
                              f"' lists the image '{name}', but '{path}' "
@@ -336,7 +316,7 @@ def _check_image_folders(folder: str, files: List[str]):
         if parent == top:
             continue
         present = {n for n in os.listdir(parent)
-                   if _is_candidate(n, IMAGE_EXTENSIONS)}
+                   if is_candidate(n, HDR_EXTENSIONS)}
         extra = sorted(present - names)
         if extra:
             shown = ', '.join(f"'{n}'" for n in extra[:3])
@@ -350,48 +330,11 @@ def _check_image_folders(folder: str, files: List[str]):
                 f"folder")
 
 
-def _read_image(path: str) -> np.ndarray:
-    """One linear HDR photograph, (H, W, 3) float32, checked."""
-    extension = osp.splitext(path)[1].lower()
-    try:
-        if extension in ('.hdr', '.pic'):
-            image = read_hdr(path)
-        elif extension == '.exr':
-            image = read_exr(path)
-        elif extension == '.npy':
-            image = read_npy(path)
-        else:
-            ldr = f" (8-bit {extension} photographs are not HDR)" \
-                if extension in LDR_EXTENSIONS else ''
-            raise ValueError(f"'{path}' is not a linear HDR image{ldr}: use "
-                             f".exr, .hdr or .npy")
-    except ImportError as error:
-        raise ValueError(f"cannot read '{path}': {error}") from None
-    except (OSError, EOFError) as error:
-        raise ValueError(f"could not read '{path}': {error}") from None
-    except ValueError as error:
-        if path in str(error):
-            raise
-        raise ValueError(f"could not read '{path}': {error}") from None
-    if image.ndim != 3 or image.shape[-1] != 3:
-        raise ValueError(f"'{path}' has shape {list(image.shape)}; a "
-                         f"photograph must be [H, W, 3] (3 channels, RGB)")
-    if not np.issubdtype(image.dtype, np.floating):
-        raise ValueError(f"'{path}' holds {image.dtype}, not floating-point "
-                         f"linear radiance; an 8-bit image is not HDR")
-    image = image.astype(np.float32, copy=False)
-    if np.isinf(image).any() or (image < 0).any():
-        raise ValueError(f"'{path}' has infinite or negative radiance; "
-                         f"linear HDR photographs must be finite and >= 0 "
-                         f"(mark missing pixels as NaN)")
-    return image
-
-
 def _read_images(folder: str, files: List[str]) -> torch.Tensor:
     images, clipped, first = [], [], None
     for name in files:
         path = _resolve(folder, name)
-        image = _read_image(path)
+        image = read_hdr_photograph(path)
         if first is None:
             first = (name, image.shape[:2])
         elif image.shape[:2] != first[1]:
@@ -419,107 +362,6 @@ def _read_images(folder: str, files: List[str]) -> torch.Tensor:
                       f"highlights will be underestimated", UserWarning,
                       stacklevel=3)
     return torch.from_numpy(np.stack(images))
-
-
-def _find_single(folder: str, extensions, exclude: set, key: str,
-                 what: str) -> str:
-    """The one file of ``what`` kind at the top of the scene folder."""
-    top = osp.realpath(folder)
-    excluded = {osp.realpath(_resolve(folder, name)) for name in exclude}
-    found = sorted(n for n in os.listdir(folder)
-                   if _is_candidate(n, extensions)
-                   and osp.isfile(osp.join(folder, n))
-                   and osp.join(top, n) not in excluded)
-    kinds = '/'.join(e for e in extensions if e != '.pic')
-    if not found:
-        folders = sorted(n for n in os.listdir(folder)
-                         if _is_candidate(n, extensions)
-                         and osp.isdir(osp.join(folder, n)))
-        also = f" ('{folders[0]}' is a folder, not a file)" if folders \
-            else ''
-        raise ValueError(f"'{folder}' holds no {what} file ({kinds}){also} "
-                         f"and {CAMERAS_FILE} names none; add one, or name "
-                         f"it as \"{key}\" in {CAMERAS_FILE}")
-    if len(found) > 1:
-        shown = ', '.join(f"'{n}'" for n in found[:4])
-        raise ValueError(f"'{folder}' holds several {what} files: "
-                         f"{shown}{' ...' if len(found) > 4 else ''}; name "
-                         f"the one to use as \"{key}\" in {CAMERAS_FILE}")
-    return found[0]
-
-
-def _read_geometry(folder: str, name: str):
-    from tg_intrinsic.geometry import estimate_normals, vertex_normals
-    path = _resolve(folder, name)
-    why = _why_not_a_file(path)
-    if why:
-        raise ValueError(f"the geometry file '{path}' named in "
-                         f"{CAMERAS_FILE} {why}")
-    try:
-        pos, face, properties = read_surface(path)
-    except FileNotFoundError as error:
-        raise ValueError(str(error)) from None
-    face_uv = None if face is None else read_face_uv(path, pos, face)
-    if face_uv is not None:
-        face_uv = torch.from_numpy(face_uv)
-    pos = torch.from_numpy(pos)
-    if face is not None:
-        face = torch.from_numpy(face).t().contiguous()
-    if all(k in properties for k in ('nx', 'ny', 'nz')):
-        normal = torch.from_numpy(np.stack(
-            [properties[k] for k in ('nx', 'ny', 'nz')], 1).astype(
-                np.float64))
-        length = normal.norm(dim=1)
-        bad = ~torch.isfinite(length) | (length < 1e-12)
-        if bool(bad.any()):
-            raise ValueError(f"'{path}' has {int(bad.sum())} zero or "
-                             f"non-finite normal(s) (nx ny nz); repair them "
-                             f"or remove the normals to have them computed")
-        # scaled to unit length; already unit ones (to float32 round-off)
-        # are kept bit for bit, so a written scene reads back unchanged
-        off = (length - 1).abs() > 1e-6
-        normal[off] = normal[off] / length[off, None]
-    elif face is not None:
-        try:
-            normal = vertex_normals(pos, face)
-        except ValueError as error:
-            raise ValueError(f"'{path}': {error}") from None
-    else:
-        if pos.size(0) <= 3:
-            raise ValueError(f"'{path}' is a point cloud of {pos.size(0)} "
-                             f"point(s) without normals; it needs more "
-                             f"points, or normals as nx ny nz")
-        normal = estimate_normals(pos, k=min(NORMAL_NEIGHBOURS,
-                                             pos.size(0) - 1))
-    return pos, face, normal, face_uv
-
-
-def _read_envmap(folder: str, name: str) -> torch.Tensor:
-    path = _resolve(folder, name)
-    why = _why_not_a_file(path)
-    if why:
-        raise ValueError(f"the environment map '{path}' named in "
-                         f"{CAMERAS_FILE} {why}")
-    try:
-        envmap = read_envmap(path)
-    except ImportError as error:
-        raise ValueError(f"cannot read '{path}': {error}") from None
-    except ValueError as error:
-        if path in str(error):
-            raise
-        raise ValueError(f"environment map '{path}': {error}") from None
-    if not bool((envmap > 0).any()):
-        raise ValueError(f"the environment map '{path}' is black (every "
-                         f"pixel 0): it lights nothing, so no material can "
-                         f"be recovered; give the lighting the photographs "
-                         f"were taken under")
-    height, width = envmap.shape[:2]
-    if width != 2 * height:
-        warnings.warn(f"the environment map '{path}' is {height} x {width}; "
-                      f"an equirectangular map is twice as wide as high, so "
-                      f"directions will be distorted", UserWarning,
-                      stacklevel=3)
-    return envmap
 
 
 # ------------------------------------------------------------------ writing

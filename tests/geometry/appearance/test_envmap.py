@@ -293,3 +293,48 @@ def test_compiled_lookup_matches_the_differentiable_one():
     torch.testing.assert_close(compiled, differentiable.detach(), rtol=0,
                                atol=1e-13)
     assert equirect_lookup(env.float(), d).dtype == torch.float32
+
+
+def test_rotate_envmap_turns_the_light_about_z():
+    from tg_intrinsic.geometry.appearance.envmap import rotate_envmap
+    envmap = torch.rand(16, 32, 3, dtype=torch.float64)
+    directions = fibonacci_sphere(200, dtype=torch.float64)
+    for degrees in (90.0, 33.75, -101.25):  # whole and fractional columns
+        turned = rotate_envmap(envmap, degrees)
+        a = math.radians(degrees)
+        rotation = torch.tensor([[math.cos(a), -math.sin(a), 0],
+                                 [math.sin(a), math.cos(a), 0], [0, 0, 1]],
+                                dtype=torch.float64)
+        # what came from d now comes from R d
+        expected = equirect_lookup(envmap, directions)
+        got = equirect_lookup(turned, directions @ rotation.T)
+        step = 360 / 32
+        if degrees % step == 0:
+            assert torch.allclose(got, expected, atol=1e-12)
+        else:  # interpolated twice: close, not exact
+            assert (got - expected).abs().mean() < 0.1
+    assert torch.equal(rotate_envmap(envmap, 360.0), envmap)
+
+
+def test_blender_envmap_follows_cycles_equirectangular_lookup():
+    """Cycles: u = (atan2(y, x) - pi) / (-2 pi), v = (acos(z) - pi) / (-pi)
+    with v = 1 at the top row (written out from its kernel, not ours)."""
+    from tg_intrinsic.geometry.appearance.envmap import blender_envmap
+    height, width = 8, 16
+    blender = torch.rand(height, width, 3, dtype=torch.float64)
+    directions = fibonacci_sphere(300, dtype=torch.float64)
+    x, y, z = directions.unbind(-1)
+    u = (torch.atan2(y, x) - math.pi) / (-2 * math.pi)
+    v = (torch.acos(z.clamp(-1, 1)) - math.pi) / (-math.pi)
+    # the pixel a direction falls in (nearest lookup: no interpolation
+    # question between the two conventions)
+    col = (u * width).floor().long().clamp(0, width - 1)
+    row = ((1 - v) * height).floor().long().clamp(0, height - 1)
+    ours = blender_envmap(blender)
+    from tg_intrinsic.geometry.appearance.envmap import direction_to_equirect
+    r, c = direction_to_equirect(directions, height, width)
+    got = ours[r.floor().long().clamp(0, height - 1),
+               c.floor().long().clamp(0, width - 1)]
+    inside = ((u * width - (u * width).round()).abs() > 1e-6)
+    assert torch.equal(got[inside], blender[row, col][inside])
+    assert torch.equal(blender_envmap(ours), blender)

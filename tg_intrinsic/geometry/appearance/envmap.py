@@ -631,3 +631,29 @@ def sun_sky_envmap(height: int = 256, width: int = 512,
     omega = equirect_solid_angles(height, width, torch.float64, device)
     sun_map = weight[..., None] * (power / (weight * omega).sum())
     return (sky[:, None, :] + sun_map).to(dtype)
+
+
+def rotate_envmap(envmap: Tensor, degrees: float) -> Tensor:
+    r"""The environment map turned by :obj:`degrees` about world :math:`z`
+    (counter-clockwise seen from above): the radiance that came from
+    azimuth :math:`\phi` comes from :math:`\phi + \alpha`. Columns are
+    shifted with linear interpolation, wrapping in azimuth; a multiple of
+    a column's width moves pixels exactly."""
+    width = envmap.size(1)
+    shift = (float(degrees) / 360.0 * width) % width
+    whole = int(math.floor(shift))
+    fraction = shift - whole
+    rolled = torch.roll(envmap, whole, dims=1)
+    if fraction == 0:
+        return rolled
+    return (1 - fraction) * rolled + fraction * torch.roll(rolled, 1, dims=1)
+
+
+def blender_envmap(envmap: Tensor) -> Tensor:
+    r"""Converts between Blender's equirectangular convention and this
+    module's (the conversion is its own inverse). Blender's Environment
+    Texture looks up :math:`u = \frac12 - \operatorname{atan2}(y, x) /
+    2\pi` (Cycles' ``direction_to_equirectangular``), so its azimuth runs
+    the other way along the columns: the columns are mirrored. Polar rows
+    agree (row 0 looks up, +z)."""
+    return torch.flip(envmap, dims=(1, ))

@@ -1,0 +1,99 @@
+"""``tg-intrinsic svbrdf`` on one capture in every format: ``--write-example
+--format F [--ldr]``, then the recovery from what was written, whose maps
+must be the native scene folder's (LDR: within the quantisation), and the
+mistakes a user makes with a capture, each one line and exit code 2."""
+import json
+import os
+
+import numpy as np
+import pytest
+
+from tests.cli import assert_user_error, run_cli
+
+TINY = ['--example-views', '6', '--example-image-size', '24',
+        '--example-subdivisions', '1']
+FAST = ['--refine', '0', '--quiet']
+FORMATS = ['colmap', 'colmap-bin', 'nerf', 'nerfstudio', 'orb']
+READ_AS = {'colmap-bin': 'colmap'}
+
+
+def example(capsys, folder, *options):
+    code, out, err = run_cli(capsys, 'svbrdf', '--write-example', folder,
+                             *TINY, *options)
+    assert code == 0, err
+    # the command to run next, as the example prints it
+    command = out.strip().splitlines()[-1].split('next: ')[1].split()
+    return command[2:command.index('--out')]
+
+
+def recover(capsys, capture, out):
+    code, _, err = run_cli(capsys, 'svbrdf', *capture, '--out', out, *FAST)
+    assert code == 0, err
+    report = json.loads(open(os.path.join(out, 'report.json')).read())
+    return dict(np.load(os.path.join(out, 'maps.npz'))), report
+
+
+@pytest.fixture(scope='module')
+def native_maps(tmp_path_factory):
+    from tg_intrinsic.cli import main
+    folder = tmp_path_factory.mktemp('native')
+    assert main(['svbrdf', '--write-example', str(folder / 'scene'), '--quiet']
+                + TINY) == 0
+    assert main(['svbrdf', str(folder / 'scene'), '--out',
+                 str(folder / 'out')] + FAST) == 0
+    return dict(np.load(folder / 'out' / 'maps.npz'))
+
+
+@pytest.mark.parametrize('form', FORMATS)
+def test_every_format_recovers_the_native_maps(capsys, tmp_path, form,
+                                               native_maps):
+    capture = example(capsys, tmp_path / 'capture', '--format', form)
+    maps, report = recover(capsys, capture, tmp_path / 'out')
+    assert report['capture']['format'] == READ_AS.get(form, form)
+    assert report['ground_truth'] is not None  # found beside the capture
+    for name, value in native_maps.items():
+        # the inputs agree to float32 round-off (rotations through a
+        # quaternion, focal lengths through an angle); the per-point fits
+        # carry it on, a few ill-conditioned points more than the rest
+        difference = np.abs(maps[name] - value)
+        assert difference.mean() < 1e-4 and difference.max() < 1e-2, name
+
+
+def test_ldr_photographs_recover_close_to_the_hdr_maps(capsys, tmp_path,
+                                                       native_maps):
+    capture = example(capsys, tmp_path / 'capture', '--format',
+                      'nerfstudio', '--ldr')
+    assert '--exposure' in capture
+    maps, report = recover(capsys, capture, tmp_path / 'out')
+    assert report['capture']['ldr']
+    left_out = report['capture']['pixels_left_out']
+    assert left_out['masked'] == 0 and left_out['clipped'] > 0
+    # 8-bit quantisation and the clipped highlights left out
+    assert np.abs(maps['roughness'] - native_maps['roughness']).mean() < 0.05
+    assert np.abs(maps['base_color'] - native_maps['base_color']).mean() \
+        < 0.08
+
+
+def test_capture_mistakes_are_one_line(capsys, tmp_path):
+    capture = example(capsys, tmp_path / 'ldr', '--format', 'colmap',
+                      '--ldr')
+    folder = capture[0]
+    code, _, err = run_cli(capsys, 'svbrdf', folder, '--out', tmp_path / 'o')
+    assert_user_error(code, err, 'svbrdf', 'needs --exposure S')
+    assert not os.path.exists(tmp_path / 'o')
+    os.remove(os.path.join(folder, 'images', '002.png'))
+    code, _, err = run_cli(capsys, 'svbrdf', folder, '--exposure', '0.1',
+                           '--out', tmp_path / 'o')
+    assert_user_error(code, err, 'svbrdf', "'002.png'", 'does not hold')
+    code, _, err = run_cli(capsys, 'svbrdf', tmp_path, '--out',
+                           tmp_path / 'o')
+    assert_user_error(code, err, 'svbrdf', 'no capture this library reads')
+    code, _, err = run_cli(capsys, 'svbrdf', '--write-example',
+                           tmp_path / 'x', '--ldr')
+    assert_user_error(code, err, 'svbrdf', '--ldr', '--format')
+    code, _, err = run_cli(capsys, 'svbrdf', folder, '--exposure', '-1')
+    assert_user_error(code, err, 'svbrdf', '--exposure')
+    code, _, err = run_cli(capsys, 'svbrdf', folder, '--envmap-rotation',
+                           'nan')
+    assert_user_error(code, err, 'svbrdf', '--envmap-rotation')
+    assert not os.path.exists(tmp_path / 'o')

@@ -64,7 +64,7 @@ def test_recovery_writes_maps_plys_figures_and_report(scene, tmp_path,
                 '--quiet']) == 0
     assert capsys.readouterr().out == ''  # --quiet: no summary
     names = set(os.listdir(out)) - {RECORD}
-    assert names == {'maps.npz', 'report.json'} | {
+    assert names == {'maps.npz', 'report.json', 'cameras.png'} | {
         f'{m}.{e}' for m in MAPS for e in ('ply', 'png')}
     maps = np.load(out / 'maps.npz')
     assert maps['base_color'].shape == (162, 3)

@@ -97,3 +97,16 @@ def test_capture_mistakes_are_one_line(capsys, tmp_path):
                            'nan')
     assert_user_error(code, err, 'svbrdf', '--envmap-rotation')
     assert not os.path.exists(tmp_path / 'o')
+
+
+def test_show_cameras_writes_the_figure_and_stops(capsys, tmp_path):
+    capture = example(capsys, tmp_path / 'capture', '--format', 'colmap')
+    code, out, err = run_cli(capsys, 'svbrdf', *capture, '--show-cameras',
+                             '--out', tmp_path / 'out')
+    assert code == 0, err
+    assert sorted(name for name in os.listdir(tmp_path / 'out')
+                  if not name.startswith('.')) == ['cameras.png',
+                                                   'report.json']
+    assert 'cameras.png' in out
+    report = json.loads((tmp_path / 'out' / 'report.json').read_text())
+    assert report['capture']['format'] == 'colmap'

@@ -219,3 +219,23 @@ def test_saving_is_atomic_and_closes_the_figure(tmp_path, monkeypatch):
         line_figure(str(path), [('a', [0, 1], [0, 1], 'k-')], 't', 'x', 'y')
     assert path.read_bytes() == before  # the old figure is kept whole
     only_file(tmp_path, 'figure.png')
+
+
+def test_draw_cameras_counts_the_cameras_that_see_nothing(tmp_path,
+                                                         monkeypatch):
+    import matplotlib.figure
+    from tg_intrinsic.datasets import svbrdf_scene
+    from tg_intrinsic.io.figures import draw_cameras
+    data = svbrdf_scene('sphere', num_views=4, image_size=(16, 16),
+                        materials='metals', seed=0, resolution=0)
+    turn = torch.diag(torch.tensor([-1.0, 1.0, -1.0]))  # about its y axis
+    extrinsics = data.extrinsics.clone()
+    extrinsics[1] = turn @ extrinsics[1]  # the same centre, looking away
+    titles = []
+    monkeypatch.setattr(matplotlib.figure.Figure, 'suptitle',
+                        lambda self, text, **kw: titles.append(text))
+    path = draw_cameras(str(tmp_path / 'c.png'), data.pos, data.intrinsics,
+                        extrinsics, (16, 16), 'four')
+    assert (tmp_path / 'c.png').stat().st_size > 0 and path.endswith('c.png')
+    assert titles == ['four\n4 cameras, 3 see the surface, 1 (orange) see '
+                      'none of it']

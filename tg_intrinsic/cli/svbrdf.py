@@ -183,6 +183,11 @@ def add_arguments(parser):
     capture.add_argument('--envmap-rotation', type=_degrees, default=0.0,
                          metavar='DEGREES', help='turn the lighting about '
                          'world up (default: 0)')
+    capture.add_argument('--show-cameras', action='store_true',
+                         help='write only cameras.png (the cameras around '
+                         'the surface, seen from three sides) to --out and '
+                         'stop: a quick look at whether a capture was read '
+                         'right; a recovery writes it too')
     capture.add_argument('--up', choices=UP_AXES, default='z',
                          help='the up axis of the capture\'s world; y is '
                          'turned to the library\'s z (default: z)')
@@ -300,6 +305,7 @@ def run(args):
             ('--gamma', args.gamma),
             ('--envmap-rotation', args.envmap_rotation or None),
             ('--up', None if args.up == 'z' else args.up),
+            ('--show-cameras', args.show_cameras or None),
             ('--visibility', None if args.visibility == VISIBILITY[0]
              else args.visibility)) if value is not None]
         if given:
@@ -422,11 +428,32 @@ def recover(args) -> int:
     # all are written; --out may not hold the scene (--out SCENE/images)
     with result_folder(out, 'svbrdf', args.overwrite,
                        inputs=inputs) as staging:
-        report = _recover(args, data, truth, device, seconds, start,
-                          staging, capture)
-    if not args.quiet:
+        figure = _draw_cameras(staging, scene, data, capture)
+        if args.show_cameras:
+            from tg_intrinsic.utils import atomic_write_json
+            atomic_write_json(os.path.join(staging, 'report.json'), {
+                'scene': os.path.abspath(scene), 'capture': capture,
+                'files': ['cameras.png', 'report.json']})
+        else:
+            report = _recover(args, data, truth, device, seconds, start,
+                              staging, capture)
+    if args.show_cameras:
+        print(f"wrote {os.path.join(out, figure)}: the cameras around the "
+              f"surface ({capture['format']} capture)")
+    elif not args.quiet:
         _print_summary(out, report)
     return 0
+
+
+def _draw_cameras(out: str, scene: str, data, capture: dict) -> str:
+    """cameras.png: the capture's cameras around its surface."""
+    from tg_intrinsic.io.figures import draw_cameras
+    name = os.path.basename(os.path.normpath(os.path.abspath(scene)))
+    draw_cameras(os.path.join(out, 'cameras.png'), data.pos,
+                 data.intrinsics, data.extrinsics,
+                 tuple(data.images.shape[1:3]),
+                 f"the cameras of {name} ({capture['format']} capture)")
+    return 'cameras.png'
 
 
 def _recover(args, data, truth, device, seconds, start, out,
@@ -505,7 +532,8 @@ def _recover(args, data, truth, device, seconds, start, out,
         'mean_entropy': float(np.mean(maps['entropy'])),
         'mean_roughness_std': float(np.mean(maps['roughness_std'])),
         'ground_truth': None if truth is None else _errors(maps, truth),
-        'files': sorted(os.path.basename(f) for f in files) + ['report.json'],
+        'files': sorted([os.path.basename(f) for f in files]
+                        + ['cameras.png']) + ['report.json'],
         'tg_intrinsic': tg_intrinsic.__version__,
     }
     atomic_write_json(os.path.join(out, 'report.json'), report)

@@ -186,3 +186,82 @@ def line_figure(path: str, series, title: str, xlabel: str, ylabel: str,
     ax.legend(fontsize=8)
     fig.tight_layout()
     return save_figure(fig, path)
+
+
+def draw_cameras(path: str, pos, intrinsics, extrinsics, image_size,
+                 title: str = '', max_points: int = 4000) -> str:
+    r"""A figure of a capture's cameras around its surface, to see at once
+    whether they look at it: the surface's points (grey) and every
+    camera's frustum (its centre, the four image corners at a tenth of the
+    scene's size, the optical axis in red) in a perspective view, from
+    above (:math:`x, y`) and from the side (:math:`x, z`); world :math:`z`
+    up. Cameras that see none of the points are drawn in orange and
+    counted in the title.
+
+    Args:
+        path (str): The PNG file.
+        pos (torch.Tensor): Surface points :math:`(N, 3)`.
+        intrinsics (torch.Tensor): :math:`(V, 3, 3)`.
+        extrinsics (torch.Tensor): :math:`(V, 3, 4)` (world to camera).
+        image_size (tuple): :math:`(H, W)` of the photographs.
+        title (str, optional): The first line of the title.
+        max_points (int, optional): Points drawn at most (a random
+            subset). (default: :obj:`4000`)
+    """
+    from tg_intrinsic.geometry.appearance.cameras import project
+    plt = _pyplot()
+    pos = torch.as_tensor(pos).detach().cpu().double()
+    K = torch.as_tensor(intrinsics).detach().cpu().double()
+    E = torch.as_tensor(extrinsics).detach().cpu().double()
+    height, width = image_size
+    uv, depth = project(pos, K, E)
+    sees = ((depth > 0) & (uv[..., 0] >= 0) & (uv[..., 0] < width)
+            & (uv[..., 1] >= 0) & (uv[..., 1] < height)).any(1)
+    size = float((pos.max(0).values - pos.min(0).values).norm()) or 1.0
+    R, t = E[:, :, :3], E[:, :, 3]
+    centres = -(R.transpose(1, 2) @ t.unsqueeze(-1)).squeeze(-1)
+    corners = torch.tensor([[0, 0], [width, 0], [width, height],
+                            [0, height]], dtype=torch.float64)
+    pixels = torch.cat([corners, torch.ones(4, 1, dtype=torch.float64)], 1)
+    # camera-space rays of the corners and the axis, at depth size / 10
+    rays = torch.linalg.solve(K.unsqueeze(1), pixels.T.unsqueeze(0)
+                              .expand(len(K), 3, 4).transpose(1, 2)
+                              .unsqueeze(-1)).squeeze(-1)
+    rays = torch.cat([rays, torch.tensor([0.0, 0, 1]).expand(len(K), 1, 3)],
+                     1) * (0.1 * size)
+    tips = centres.unsqueeze(1) + rays @ R  # R^T x, row-wise
+    shown = pos[torch.randperm(len(pos), generator=torch.Generator()
+                               .manual_seed(0))[:max_points]].numpy()
+    fig = plt.figure(figsize=(13, 4.6))
+    panels = [fig.add_subplot(1, 3, 1, projection='3d'),
+              fig.add_subplot(1, 3, 2), fig.add_subplot(1, 3, 3)]
+    for panel, axes in zip(panels, (None, (0, 1), (0, 2))):
+        keep = (0, 1, 2) if axes is None else axes
+
+        def xy(points):
+            return [points[..., k] for k in keep]
+
+        panel.scatter(*xy(shown), s=1, c='0.6', depthshade=False) \
+            if axes is None else panel.scatter(*xy(shown), s=1, c='0.6')
+        for v in range(len(K)):
+            colour = 'tab:blue' if bool(sees[v]) else 'tab:orange'
+            c, tip = centres[v].numpy(), tips[v].numpy()
+            for k in range(4):
+                panel.plot(*xy(np.stack([c, tip[k]])), color=colour, lw=0.6)
+                panel.plot(*xy(np.stack([tip[k], tip[(k + 1) % 4]])),
+                           color=colour, lw=0.6)
+            panel.plot(*xy(np.stack([c, tip[4] * 3 - 2 * c])), color='red',
+                       lw=0.6)
+        if axes is not None:
+            panel.set_aspect('equal')
+            panel.set_xlabel('xyz'[axes[0]])
+            panel.set_ylabel('xyz'[axes[1]])
+            panel.set_title('from above' if axes == (0, 1) else
+                            'from the side')
+        else:
+            panel.set_box_aspect((1, 1, 1))
+    blind = int((~sees).sum())
+    fig.suptitle(f"{title}\n{len(K)} cameras, {len(K) - blind} see the "
+                 f"surface" + (f", {blind} (orange) see none of it"
+                               if blind else ''))
+    return save_figure(fig, path)

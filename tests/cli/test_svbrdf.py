@@ -88,6 +88,8 @@ def test_recovery_writes_maps_plys_figures_and_report(scene, tmp_path,
     # --steps asks for the SH fit before the default refinement
     assert set(report['seconds']) >= {'read', 'project', 'fit', 'refine',
                                       'write', 'total'}
+    # this process's peak: torch alone holds a few hundred MB
+    assert 0.1 < report['peak_memory_gib'] < 24
     assert report['pipeline']['steps'] == [
         'project', 'fit_spherical_harmonics', 'spectral_uncertainty', 'fit',
         'refine']

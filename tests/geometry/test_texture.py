@@ -260,3 +260,42 @@ def test_uv_atlas_without_xatlas_says_how_to_get_it(hide_module):
     pos, face = grid_mesh(3)
     with pytest.raises(ImportError, match='pip install xatlas'):
         uv_atlas(pos, face)
+
+
+def test_grid_atlas_gives_every_triangle_its_own_texels():
+    from tg_intrinsic.geometry import grid_atlas
+    for num_faces in (1, 2, 7, 1280):
+        face_uv = grid_atlas(num_faces)
+        assert face_uv.shape == (3, num_faces, 2)
+        assert float(face_uv.min()) > 0 and float(face_uv.max()) < 1
+        a, b, c = face_uv[0], face_uv[1], face_uv[2]
+        signed = 0.5 * ((b - a)[:, 0] * (c - a)[:, 1]
+                        - (b - a)[:, 1] * (c - a)[:, 0])
+        assert bool((signed > 0).all())  # counter-clockwise, not flipped
+        # no texel claimed twice: overlapping triangles would cover less
+        # than their summed area (texel centres on edges count for both
+        # neighbours, a few percent more)
+        size = max(128, int(32 * num_faces ** 0.5))
+        index, _, _ = rasterize_uv(face_uv, size, size)
+        assert 0.98 < index.numel() / size ** 2 / float(signed.sum()) < 1.1
+        # and at the size the docstring asks for, every triangle has texels
+        size = max(16, int(8 * num_faces ** 0.5))
+        _, owner, _ = rasterize_uv(face_uv, size, size)
+        assert torch.unique(owner).numel() == num_faces
+
+
+def test_a_crashing_xatlas_is_an_error_not_the_end(monkeypatch):
+    pytest.importorskip('xatlas')
+    import tg_intrinsic.geometry.texture as texture
+    from tg_intrinsic.geometry import uv_atlas
+    pos, face = grid_mesh(3)
+    monkeypatch.setattr(texture, '_XATLAS_CHILD', 'import os, signal; '
+                        'os.kill(os.getpid(), signal.SIGSEGV)')
+    with pytest.raises(RuntimeError, match=r'xatlas crashed \(signal 11\) '
+                       r'on this mesh of \d+ triangles'):
+        uv_atlas(pos, face)
+    # the glTF writer goes on with the grid atlas, and says why
+    from tg_intrinsic.io.gltf import _atlas
+    with pytest.warns(UserWarning, match='xatlas crashed .* grid atlas'):
+        face_uv, how = _atlas(pos, face)
+    assert how == 'grid' and face_uv.shape == (3, face.size(1), 2)

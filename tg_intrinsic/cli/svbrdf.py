@@ -527,6 +527,7 @@ def _recover(args, data, truth, device, seconds, start, out,
                     'visibility': refine and refine['visibility'],
                     'device': str(device), 'dtype': args.dtype},
         'seconds': seconds,
+        'peak_memory_gib': _peak_memory_gib(),
         'loss': pipeline['loss'],
         'texture': texture,
         'mean_entropy': float(np.mean(maps['entropy'])),
@@ -538,6 +539,15 @@ def _recover(args, data, truth, device, seconds, start, out,
     }
     atomic_write_json(os.path.join(out, 'report.json'), report)
     return report
+
+
+def _peak_memory_gib() -> float:
+    """The most memory this process has held (resident), in GiB."""
+    import resource
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    # kilobytes on Linux, bytes on macOS
+    return round(peak / (2 ** 30 if sys.platform == 'darwin' else 2 ** 20),
+                 3)
 
 
 def _check_texture_inputs(data):

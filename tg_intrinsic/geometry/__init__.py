@@ -36,7 +36,7 @@ from .mesh import (face_areas, face_normals, vertex_normals, lumped_mass,
                    laplacian_spectrum, weld_vertices)
 from .sparse import to_scipy, from_scipy
 from .texture import (bake_texture, rasterize_uv, texture_grid_edges,
-                      uv_atlas, uv_sphere)
+                      uv_atlas, grid_atlas, uv_sphere)
 from .geodesics import geodesic_neighbourhoods, log_map, vertex_area_weights
 
 __all__ = [
@@ -61,7 +61,7 @@ __all__ = [
     'to_scipy',
     'from_scipy',
     'rasterize_uv',
-    'texture_grid_edges', 'uv_atlas', 'bake_texture',
+    'texture_grid_edges', 'uv_atlas', 'grid_atlas', 'bake_texture',
     'uv_sphere',
     'mls_grad_div',
     'build_mls_operators',

@@ -19,11 +19,13 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from .checks import (check_faces, check_image_size, check_index,
-                     check_points, check_positive_int, check_unit_interval)
+from .checks import (check_choice, check_faces, check_image_size,
+                     check_index, check_points, check_positive_int,
+                     check_unit_interval)
 from .jit import jit
 
 __all__ = ['rasterize_uv', 'texture_grid_edges', 'uv_sphere', 'uv_atlas',
+           'grid_atlas',
            'bake_texture']
 
 # A texel centre on a triangle's edge belongs to it (up to this much of
@@ -240,39 +242,114 @@ def uv_sphere(rows: int = 16, cols: int = 32,
     return pos.to(dtype), face.contiguous(), uv.to(dtype)
 
 
-def uv_atlas(pos: Tensor, face: Tensor) -> Tensor:
-    r"""A UV atlas of a triangle mesh: charts cut and packed into
-    :math:`[0, 1]^2` without overlap by xatlas (the library Blender's and
-    many engines' exporters use; ``pip install xatlas``, the
-    ``[textures]`` extra), as UVs per triangle corner, the layout
-    :func:`rasterize_uv` and :func:`bake_texture` take. Runs on the CPU;
-    the result is on ``pos``'s device.
+# xatlas is run in a child process: it crashes (SIGSEGV) on some meshes,
+# e.g. an 82k-triangle icosphere (xatlas 0.0.11; jpcy/xatlas#151), and a
+# crash must not end the command that asked for the atlas
+_XATLAS_CHILD = (
+    "import sys, numpy as np, xatlas\n"
+    "given = np.load(sys.argv[1])\n"
+    "mapping, indices, uvs = xatlas.parametrize(given['v'], given['f'])\n"
+    "np.savez(sys.argv[2], mapping=mapping, indices=indices, uvs=uvs)\n")
+
+
+def uv_atlas(pos: Tensor, face: Tensor, method: str = 'xatlas') -> Tensor:
+    r"""A UV atlas of a triangle mesh: charts packed into :math:`[0, 1]^2`
+    without overlap, as UVs per triangle corner, the layout
+    :func:`rasterize_uv` and :func:`bake_texture` take.
+
+    ``'xatlas'`` cuts the surface into charts and packs them with xatlas
+    (the library Blender's and many engines' exporters use; ``pip install
+    xatlas``, the ``[textures]`` extra), in a child process, so that a
+    crash of xatlas raises a :class:`RuntimeError` instead of ending the
+    program. ``'grid'`` (:func:`grid_atlas`) gives every pair of triangles
+    its own square of a grid: no seams are saved, any mesh size works at
+    once. Runs on the CPU; the result is on ``pos``'s device.
 
     Args:
         pos (torch.Tensor): Vertices :math:`(V, 3)`.
         face (torch.Tensor): Triangles :math:`(3, F)`.
+        method (str, optional): ``'xatlas'`` or ``'grid'``.
+            (default: :obj:`'xatlas'`)
 
     Returns:
         ``face_uv`` :math:`(3, F, 2)` in ``pos``'s dtype: the UV of corner
         :math:`k` of triangle :math:`f` at ``[k, f]``.
     """
+    method = check_choice(method, 'method', ('xatlas', 'grid'))
+    pos = check_points(pos)
+    face = check_faces(face, pos.size(0), pos)
+    if method == 'grid':
+        return grid_atlas(face.size(1), pos.dtype).to(pos.device)
     try:
-        import xatlas
+        import xatlas  # noqa: F401
     except ImportError:
         raise ImportError("a UV atlas needs the xatlas package: pip install "
                           "xatlas (or tg_intrinsic[textures]), or give the "
                           "mesh UVs ('vt' in an OBJ, s t in a PLY)") from None
-    pos = check_points(pos)
-    face = check_faces(face, pos.size(0), pos)
     vertices = pos.detach().cpu().double().numpy().astype(np.float32)
     triangles = face.t().cpu().numpy().astype(np.uint32)
-    mapping, indices, uvs = xatlas.parametrize(vertices, triangles)
+    mapping, indices, uvs = _xatlas_in_a_child(vertices, triangles)
     if len(indices) != len(triangles) or not np.array_equal(
             mapping[indices], triangles):  # one chart corner per corner
         raise RuntimeError('xatlas returned triangles in another order than '
                            'it was given; cannot map its UVs back')
     face_uv = torch.from_numpy(np.clip(uvs[indices], 0, 1)).transpose(0, 1)
     return face_uv.to(pos.device, pos.dtype).contiguous()
+
+
+def _xatlas_in_a_child(vertices: np.ndarray, triangles: np.ndarray):
+    import subprocess
+    import sys
+    import tempfile
+    with tempfile.TemporaryDirectory(prefix='tg-intrinsic-atlas-') as work:
+        given, made = f'{work}/mesh.npz', f'{work}/atlas.npz'
+        np.savez(given, v=vertices, f=triangles)
+        done = subprocess.run([sys.executable, '-c', _XATLAS_CHILD, given,
+                               made], capture_output=True, text=True)
+        if done.returncode != 0:
+            why = f'crashed (signal {-done.returncode})' \
+                if done.returncode < 0 else \
+                (done.stderr.strip().splitlines() or ['failed'])[-1]
+            raise RuntimeError(f"xatlas {why} on this mesh of "
+                               f"{len(triangles)} triangles")
+        with np.load(made) as atlas:
+            return atlas['mapping'], atlas['indices'], atlas['uvs']
+
+
+def grid_atlas(num_faces: int, dtype: torch.dtype = torch.float64
+               ) -> Tensor:
+    r"""A UV atlas that needs no charts: the :math:`F` triangles, in
+    pairs, fill the squares of a :math:`G \times G` grid,
+    :math:`G = \lceil \sqrt{\lceil F / 2 \rceil} \rceil`, the first of a
+    pair in the lower-left half of its square and the second in the
+    upper-right half, each shrunk by a tenth of the square so that texels
+    do not bleed between triangles. Values are interpolated in a triangle
+    by its barycentrics as in any atlas; the shapes are not kept, so a
+    texture needs more texels than with xatlas' charts (at least about
+    :math:`8 \sqrt{F}` on a side for every triangle to own texels).
+
+    Args:
+        num_faces (int): :math:`F`.
+        dtype (torch.dtype, optional): (default: :obj:`torch.float64`)
+
+    Returns:
+        ``face_uv`` :math:`(3, F, 2)`.
+    """
+    num_faces = check_positive_int(num_faces, 'num_faces')
+    pairs = (num_faces + 1) // 2
+    side = math.ceil(math.sqrt(pairs))
+    index = torch.arange(num_faces)
+    cell = index // 2
+    x0 = (cell % side).to(dtype) / side
+    y0 = (cell // side).to(dtype) / side
+    step, margin = 1.0 / side, 0.1 / side
+    lo, hi = margin, step - 2 * margin
+    lower = torch.tensor([[lo, lo], [hi, lo], [lo, hi]], dtype=dtype)
+    upper = torch.tensor([[step - lo, step - lo], [step - hi, step - lo],
+                          [step - lo, step - hi]], dtype=dtype)
+    corners = torch.where((index % 2 == 0).view(-1, 1, 1), lower, upper)
+    return (corners + torch.stack([x0, y0], -1).unsqueeze(1)).transpose(
+        0, 1).contiguous()
 
 
 def bake_texture(values: Tensor, face: Tensor, face_uv: Tensor,

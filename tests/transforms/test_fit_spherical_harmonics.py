@@ -218,3 +218,20 @@ def test_bad_values_are_named():
         FitSphericalHarmonics(prefilter_alpha=-0.1)
     with pytest.raises(ValueError, match='at least 144'):
         FitSphericalHarmonics(num_light_samples=100)
+
+
+def test_chunks_of_points_give_the_same_fits(monkeypatch):
+    """The fit runs on chunks of points to bound its memory; each point's
+    fit is its own, so any chunking gives the same numbers."""
+    import tg_intrinsic.transforms.fit_spherical_harmonics as module
+    from tg_intrinsic.datasets import svbrdf_scene
+    from tg_intrinsic.transforms import FitSphericalHarmonics, ProjectViews
+    data = ProjectViews()(svbrdf_scene('sphere', num_views=6,
+                                       image_size=(24, 24), seed=0,
+                                       resolution=1))
+    whole = FitSphericalHarmonics()(data)
+    monkeypatch.setattr(module, 'POINTS_PER_CHUNK', 7)
+    chunked = FitSphericalHarmonics()(data)
+    for key in ('sh_in', 'sh_out', 'sh_in_obs', 'light_radiance',
+                'mirror_dir'):
+        assert torch.equal(getattr(whole, key), getattr(chunked, key)), key

@@ -145,9 +145,6 @@ def add_arguments(parser):
     tv_weight = default_of(FrequencySVBRDF.recover, 'tv_weight')
     l_max_type = _l_max_type(default_of(FitSphericalHarmonics.__init__,
                                         'num_light_samples'))
-    from tg_intrinsic.io.capture import CAPTURE_FORMATS
-    from tg_intrinsic.io.capture_writer import WRITE_FORMATS
-    from tg_intrinsic.io.capture_views import UP_AXES
     parser.add_argument('scene', nargs='?', metavar='CAPTURE',
                         help='the capture: a scene folder (format below), a '
                         'COLMAP model with images/, a transforms.json '
@@ -156,41 +153,7 @@ def add_arguments(parser):
     parser.add_argument('--out', default=None, metavar='DIR',
                         help='output folder (default: runs/svbrdf_<CAPTURE'
                         ' name>)')
-    capture = parser.add_argument_group(
-        'captures', 'what a capture format has no place for')
-    capture.add_argument('--format', default=None, choices=sorted(
-        set(CAPTURE_FORMATS) | set(WRITE_FORMATS)),
-        help='the capture\'s format (default: recognised from the folder);'
-        ' with --write-example, the format to write (default: native)')
-    capture.add_argument('--geometry', default=None, metavar='MESH',
-                         help='the surface (OBJ, OFF, PLY, STL), in the '
-                         'cameras\' world (default: the format\'s, else '
-                         'the one mesh file in the capture folder)')
-    capture.add_argument('--envmap', default=None, metavar='MAP',
-                         help='the lighting, an equirectangular .exr/.hdr '
-                         '(default: the format\'s, else the one such file '
-                         'in the capture folder)')
-    capture.add_argument('--exposure', type=positive_float, default=None,
-                         metavar='S', help='8-bit photographs: decoded '
-                         'values are S times the radiance of the '
-                         'environment map\'s units (required for LDR '
-                         'photographs; EXIF exposures, where every '
-                         'photograph has one, scale each relative to the '
-                         'first)')
-    capture.add_argument('--gamma', type=positive_float, default=None,
-                         metavar='G', help='decode 8-bit photographs as '
-                         'value^G instead of the sRGB curve')
-    capture.add_argument('--envmap-rotation', type=_degrees, default=0.0,
-                         metavar='DEGREES', help='turn the lighting about '
-                         'world up (default: 0)')
-    capture.add_argument('--show-cameras', action='store_true',
-                         help='write only cameras.png (the cameras around '
-                         'the surface, seen from three sides) to --out and '
-                         'stop: a quick look at whether a capture was read '
-                         'right; a recovery writes it too')
-    capture.add_argument('--up', choices=UP_AXES, default='z',
-                         help='the up axis of the capture\'s world; y is '
-                         'turned to the library\'s z (default: z)')
+    _add_capture_arguments(parser)
     parser.add_argument('--overwrite', action='store_true',
                         help='write into --out (or --write-example DIR) even '
                         'when it holds files that svbrdf did not write: '
@@ -262,6 +225,53 @@ def add_arguments(parser):
                         default='float64', help='precision of the '
                         'computation; float32 halves the memory '
                         '(default: float64)')
+    _add_example_arguments(parser)
+
+
+def _add_capture_arguments(parser):
+    """The options a capture format has no place for."""
+    from tg_intrinsic.io.capture import CAPTURE_FORMATS
+    from tg_intrinsic.io.capture_writer import WRITE_FORMATS
+    from tg_intrinsic.io.capture_views import UP_AXES
+    capture = parser.add_argument_group(
+        'captures', 'what a capture format has no place for')
+    capture.add_argument('--format', default=None, choices=sorted(
+        set(CAPTURE_FORMATS) | set(WRITE_FORMATS)),
+        help='the capture\'s format (default: recognised from the folder);'
+        ' with --write-example, the format to write (default: native)')
+    capture.add_argument('--geometry', default=None, metavar='MESH',
+                         help='the surface (OBJ, OFF, PLY, STL), in the '
+                         'cameras\' world (default: the format\'s, else '
+                         'the one mesh file in the capture folder)')
+    capture.add_argument('--envmap', default=None, metavar='MAP',
+                         help='the lighting, an equirectangular .exr/.hdr '
+                         '(default: the format\'s, else the one such file '
+                         'in the capture folder)')
+    capture.add_argument('--exposure', type=positive_float, default=None,
+                         metavar='S', help='8-bit photographs: decoded '
+                         'values are S times the radiance of the '
+                         'environment map\'s units (required for LDR '
+                         'photographs; EXIF exposures, where every '
+                         'photograph has one, scale each relative to the '
+                         'first)')
+    capture.add_argument('--gamma', type=positive_float, default=None,
+                         metavar='G', help='decode 8-bit photographs as '
+                         'value^G instead of the sRGB curve')
+    capture.add_argument('--envmap-rotation', type=_degrees, default=0.0,
+                         metavar='DEGREES', help='turn the lighting about '
+                         'world up (default: 0)')
+    capture.add_argument('--show-cameras', action='store_true',
+                         help='write only cameras.png (the cameras around '
+                         'the surface, seen from three sides) to --out and '
+                         'stop: a quick look at whether a capture was read '
+                         'right; a recovery writes it too')
+    capture.add_argument('--up', choices=UP_AXES, default='z',
+                         help='the up axis of the capture\'s world; y is '
+                         'turned to the library\'s z (default: z)')
+
+
+def _add_example_arguments(parser):
+    """The options of --write-example."""
     example = parser.add_argument_group(
         'synthetic example', 'write a scene folder instead of reading one')
     example.add_argument('--write-example', default=None, metavar='DIR',

@@ -14,6 +14,7 @@ from .hdr import read_envmap, read_exr, read_hdr, read_npy
 from .mesh import read_face_uv, read_surface
 
 __all__ = ['HDR_EXTENSIONS', 'ENVMAP_EXTENSIONS', 'why_not_a_file',
+           'read_json',
            'is_candidate', 'find_single_file', 'read_geometry_file',
            'read_envmap_file', 'read_hdr_photograph']
 
@@ -42,6 +43,21 @@ def why_not_a_file(path: str) -> Optional[str]:
     if osp.exists(parent) and not osp.isdir(parent):
         return f"does not exist: '{parent}' is a file, not a folder"
     return 'does not exist'
+
+
+def read_json(path: str):
+    """The parsed JSON file (a UTF-8 byte-order mark allowed), or a
+    :class:`ValueError` that names the file, the line and the column of a
+    syntax error."""
+    import json
+    try:
+        with open(path, 'r', encoding='utf-8-sig') as f:
+            return json.load(f)
+    except json.JSONDecodeError as error:
+        raise ValueError(f"'{path}' is not valid JSON: {error.msg} at line "
+                         f"{error.lineno}, column {error.colno}") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise ValueError(f"could not read '{path}': {error}") from None
 
 
 def is_candidate(name: str, extensions) -> bool:

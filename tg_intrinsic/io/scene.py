@@ -35,7 +35,7 @@ from torch_geometric.data import Data
 from tg_intrinsic.utils import atomic_write, atomic_write_file
 
 from .capture_files import (ENVMAP_EXTENSIONS, HDR_EXTENSIONS,
-                            find_single_file, is_candidate,
+                            find_single_file, is_candidate, read_json,
                             read_envmap_file, read_geometry_file,
                             read_hdr_photograph, why_not_a_file)
 from .hdr import looks_clipped, write_hdr
@@ -213,14 +213,7 @@ def _read_cameras_json(folder: str) -> dict:
                          f"needs one listing every photograph with its "
                          f"camera (K, R, t); run 'tg-intrinsic svbrdf "
                          f"--write-example DIR' to see the format")
-    try:
-        with open(path, 'r', encoding='utf-8-sig') as f:
-            spec = json.load(f)
-    except json.JSONDecodeError as error:
-        raise ValueError(f"'{path}' is not valid JSON: {error.msg} at line "
-                         f"{error.lineno}, column {error.colno}") from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise ValueError(f"could not read '{path}': {error}") from None
+    spec = read_json(path)
     if isinstance(spec, list):
         spec = {'cameras': spec}
     if not isinstance(spec, dict):

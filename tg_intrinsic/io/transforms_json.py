@@ -31,7 +31,7 @@ from typing import List, Optional
 import numpy as np
 
 from .capture_files import (HDR_EXTENSIONS, read_hdr_photograph,
-                            why_not_a_file)
+                            read_json, why_not_a_file)
 from .capture_views import CaptureSpec, CaptureView, assemble_capture
 from .photographs import LDR_EXTENSIONS
 
@@ -60,14 +60,7 @@ def find_transforms(path) -> Optional[str]:
 
 
 def _load(path: str) -> dict:
-    try:
-        with open(path, 'r', encoding='utf-8-sig') as f:
-            spec = json.load(f)
-    except json.JSONDecodeError as error:
-        raise ValueError(f"'{path}' is not valid JSON: {error.msg} at line "
-                         f"{error.lineno}, column {error.colno}") from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise ValueError(f"could not read '{path}': {error}") from None
+    spec = read_json(path)
     if not isinstance(spec, dict) or not isinstance(spec.get('frames'),
                                                     list) \
             or not spec['frames']:

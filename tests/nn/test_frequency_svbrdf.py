@@ -679,3 +679,20 @@ def test_recover_bad_input():
     with pytest.raises(ValueError, match='no environment map'):
         model.recover(no_light, refine=True, visibility='horizon',
                       progress=False)
+
+
+def test_the_table_search_in_chunks_of_points_finds_the_same(monkeypatch):
+    """The search over the tables runs on chunks of points to bound its
+    memory; every point's search is its own, so the refinement is the
+    same to the bit."""
+    import tg_intrinsic.nn.frequency_svbrdf as module
+    data, _ = full_integral_data()
+    results = []
+    for rows in (module.TABLE_SEARCH_ROWS, 5):
+        monkeypatch.setattr(module, 'TABLE_SEARCH_ROWS', rows)
+        model = FrequencySVBRDF(data.num_nodes)
+        model.fit(data, solver='lm', progress=False)
+        results.append(model.refine(data, steps=3, progress=False))
+    for name in ('base_color', 'metallic', 'roughness'):
+        assert torch.equal(getattr(results[0], name),
+                           getattr(results[1], name)), name

@@ -417,8 +417,10 @@ class FrequencySVBRDF(torch.nn.Module):
             data.obs_mask.bool(), envmap.to(single), grid.to(single),
             visible, light_samples, brdf_samples, seed)
         parts['tables'] = time.perf_counter() - start - parts['visibility']
+        # the tables stay single precision (half the memory of the largest
+        # array of a refinement); what is read of them is cast to dtype
         problem = _IntegralProblem(self, data, tv_weight, tv_k, grid,
-                                   irradiance.to(dtype), tables.to(dtype))
+                                   irradiance.to(dtype), tables)
         if metallic is None and metallic_starts and steps > 0:
             history = self._fit_metallic_starts(problem, steps, rounds,
                                                 progress)
@@ -967,6 +969,18 @@ class _Problem:
         return residual, jacobian
 
 
+#: Points whose table search runs at once: its temporaries are
+#: [n, V, R, 3] in the fit's precision, 0.8 GB each for 41k points x 25
+#: views x 32 roughness cells at once.
+TABLE_SEARCH_ROWS = 4096
+
+
+def _row_chunks(num: int, size: int):
+    """Slices of ``range(num)`` of at most ``size``."""
+    return [slice(start, min(start + size, num))
+            for start in range(0, max(num, 1), size)]
+
+
 class _IntegralProblem(_Problem):
     """The fitting problem of :meth:`FrequencySVBRDF.refine`: the full
     integral, tabulated over a roughness grid and interpolated linearly
@@ -985,11 +999,18 @@ class _IntegralProblem(_Problem):
         roughness cells of the tables, each with its least-squares base
         colour (clamped to [0, 1]) and scored by the data loss: base colour
         (N, 3), metallic (N), roughness (N)."""
-        specular = self.tables[:, :, :, 0]        # [N, V, R, 3]
-        constant = self.tables[:, :, :, 1]
-        target = self.target.unsqueeze(2)         # [N, V, 1, 3]
-        weight = self.weight.unsqueeze(2)         # [N, V, 1, 1]
-        diffuse = self.diffuse.unsqueeze(1).unsqueeze(1)  # [N, 1, 1, 3]
+        found = [self._table_search(rows) for rows in _row_chunks(
+            self.tables.size(0), TABLE_SEARCH_ROWS)]
+        return tuple(torch.cat(column) for column in zip(*found))
+
+    def _table_search(self, rows: slice):
+        """:meth:`table_search` of the points in ``rows``."""
+        tables = self.tables[rows].to(self.dtype)
+        specular = tables[:, :, :, 0]             # [n, V, R, 3]
+        constant = tables[:, :, :, 1]
+        target = self.target[rows].unsqueeze(2)   # [n, V, 1, 3]
+        weight = self.weight[rows].unsqueeze(2)   # [n, V, 1, 1]
+        diffuse = self.diffuse[rows].unsqueeze(1).unsqueeze(1)  # [n,1,1,3]
         best_loss = best = None
         for metallic in (0.0, 1.0):
             # prediction = colour * slope + offset, linear in the colour
@@ -997,9 +1018,9 @@ class _IntegralProblem(_Problem):
             offset = constant + (0.0 if metallic else 0.04 * specular)
             colour = ((weight * slope * (target - offset)).sum(1)
                       / (weight * slope * slope).sum(1).clamp_min(1e-30)
-                      ).clamp(0, 1)               # [N, R, 3]
+                      ).clamp(0, 1)               # [n, R, 3]
             loss = (weight * (colour.unsqueeze(1) * slope + offset
-                              - target).abs()).sum((1, 3))   # [N, R]
+                              - target).abs()).sum((1, 3))   # [n, R]
             loss, cell = loss.min(1)
             found = (colour[torch.arange(cell.numel(), device=cell.device),
                             cell],
@@ -1025,8 +1046,8 @@ class _IntegralProblem(_Problem):
             0, self.grid.numel() - 1)
         cell = t.detach().floor().long().clamp(max=self.grid.numel() - 2)
         frac = (t - cell).view(-1, 1, 1)
-        lower = self.tables[rows, :, cell]            # [n, V, 2, 3]
-        upper = self.tables[rows, :, cell + 1]
+        lower = self.tables[rows, :, cell].to(dtype)  # [n, V, 2, 3]
+        upper = self.tables[rows, :, cell + 1].to(dtype)
         table = lower + (upper - lower) * frac.unsqueeze(-1)
         specular, constant = table[:, :, 0], table[:, :, 1]
         diffuse = self.diffuse[rows].unsqueeze(1)      # [n, 1, 3]

@@ -561,3 +561,16 @@ def test_distorted_colmap_photographs_are_undistorted(tmp_path):
     undistorted = (data.images - native.images).abs()[kept].mean()
     raw = (distorted - native.images).abs()[kept].mean()
     assert float(undistorted) < 0.6 * float(raw)
+
+
+def test_photographs_the_model_does_not_list_are_named(capture, tmp_path):
+    import shutil
+    from tg_intrinsic.io.colmap import colmap_spec
+    written = write_capture(tmp_path / 'c', capture, 'colmap')
+    images = os.path.join(written['capture'], 'images')
+    shutil.copy(os.path.join(images, '000.exr'),
+                os.path.join(images, 'unregistered.exr'))
+    spec = colmap_spec(written['capture'])
+    assert len(spec.views) == capture.images.size(0)
+    assert spec.notes == ["1 photograph(s) in images/ are not in the model "
+                          "(not registered), left out: unregistered.exr"]

@@ -738,6 +738,7 @@ def _print_summary(out: str, report: dict):
         + ('' if not capture.get('ldr') else
            f", 8-bit photographs at exposure {capture['exposure']:g}")
         + (f"; pixels left out: {dropped}" if dropped else ''),
+        *capture.get('notes', []),
         f"{report['points']} points, {report['views']} views: "
         f"{seen['mean']:.1f} observations per point on average"
         + (f", {seen['unseen_points']} points unseen"

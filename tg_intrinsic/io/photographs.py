@@ -53,17 +53,12 @@ _EXPOSURE_TIME, _F_NUMBER, _ISO = 0x829A, 0x829D, 0x8827
 
 
 class LDRPhoto(NamedTuple):
-    r"""A photograph read by :func:`read_ldr`.
-
-    Attributes:
-        radiance (numpy.ndarray): Linear values in :math:`[0, 1]`, float32,
-            shape :math:`(H, W, 3)`.
-        clipped (numpy.ndarray): bool :math:`(H, W)`, pixels with a channel
-            at the largest code, and their 8 neighbours.
-        alpha (numpy.ndarray or None): bool :math:`(H, W)`, where the alpha
-            channel is above half its maximum, or :obj:`None` when the file
-            has no alpha channel.
-    """
+    r"""A photograph read by :func:`read_ldr`: ``radiance``, linear values
+    in :math:`[0, 1]` (float32, :math:`(H, W, 3)`); ``clipped``, bool
+    :math:`(H, W)`, the pixels with a channel at the largest code and
+    their 8 neighbours; ``alpha``, bool :math:`(H, W)` where the alpha
+    channel is above half its maximum, or :obj:`None` when the file has
+    no alpha channel."""
     radiance: np.ndarray
     clipped: np.ndarray
     alpha: Optional[np.ndarray]

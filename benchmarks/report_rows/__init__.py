@@ -12,7 +12,8 @@ ORDER = [
     'gravo_applications', 'gravo_scale', 'gravo_diffusion',
     'compile_precision', 'hsn_accuracy', 'normalisation', 'cli_sweep',
     'svbrdf_accuracy', 'svbrdf_mitsuba', 'svbrdf_model_error', 'svbrdf_merge',
-    'svbrdf_views', 'svbrdf_speed', 'part_segmentation', 'hsn_correspondence',
+    'svbrdf_views', 'svbrdf_speed', 'svbrdf_capture_size',
+    'part_segmentation', 'hsn_correspondence',
     'sphere_digits', 'perona_malik', 'out_of_core', 'ddp_training', 'gpu',
 ]
 

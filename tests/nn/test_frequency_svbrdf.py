@@ -405,6 +405,36 @@ def test_refine_reaches_the_full_integral_parameters():
     assert result.loss[-1] < 0.9 * local.loss[-1]
 
 
+def test_refine_holds_the_observations_not_the_views():
+    """The refinement works on each point's observations: views that see
+    no point change nothing (same samples, bit for bit), and a cap on the
+    views per point keeps the errors close to those of every view."""
+    data, truth = full_integral_data()
+    count = data.obs_mask.sum(1)
+    model = FrequencySVBRDF(data.num_nodes)
+    model.fit(data, solver='lm', metallic=1.0, progress=False)
+    start = {k: v.clone() for k, v in model.state_dict().items()}
+    result = model.refine(data, metallic=1.0, steps=5, progress=False)
+    wider = data.clone()
+    blind = torch.zeros(data.num_nodes, 7, dtype=torch.bool)
+    for key in ('obs_radiance', 'obs_dir', 'mirror_dir'):
+        wider[key] = torch.cat([data[key][:, :3], torch.ones(
+            data.num_nodes, 7, 3, dtype=data[key].dtype), data[key][:, 3:]],
+            1)
+    wider.obs_mask = torch.cat([data.obs_mask[:, :3], blind,
+                                data.obs_mask[:, 3:]], 1)
+    model.load_state_dict(start)
+    widened = model.refine(wider, metallic=1.0, steps=5, progress=False)
+    for key in ('base_color', 'roughness', 'roughness_std'):
+        assert torch.equal(getattr(result, key), getattr(widened, key))
+    cap = int(count.float().median()) // 2
+    assert (count > cap).float().mean() > 0.5
+    model.load_state_dict(start)
+    capped = model.refine(data, metallic=1.0, steps=5, max_views=cap,
+                          progress=False)
+    assert errors(capped, truth)[0] < errors(result, truth)[0] + 0.01
+
+
 def test_table_search_finds_the_tabulated_parameters():
     """Observations made by the tables themselves at a grid roughness, a
     pure metal or dielectric and any colour: the search returns exactly

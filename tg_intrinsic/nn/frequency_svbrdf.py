@@ -13,6 +13,8 @@ from tg_intrinsic.geometry.appearance.direct_lighting import (
 from tg_intrinsic.geometry.appearance.brdf import (
     MIN_ALPHA, dominant_direction, lobe_degree_sums, model_alpha,
     principled_reflectance, principled_reflectance_jacobian, sh_reflectance)
+from tg_intrinsic.geometry.appearance.observations import \
+    compact_observations
 from tg_intrinsic.geometry.appearance.sh import (fit_light,
                                                  light_directions, real_sh,
                                                  smith_g1)
@@ -33,6 +35,9 @@ DEFAULT_STEPS = {'adam': 200, 'lm': 20}
 DEFAULT_L_MAX = {'eq5.11': 5, 'split_sum': 8}
 #: Levenberg-Marquardt iterations per round of the refinement.
 REFINE_STEPS = 10
+#: Most observations per point in the refinement (see
+#: :meth:`FrequencySVBRDF.refine`).
+REFINE_MAX_VIEWS = 32
 # Longest Levenberg-Marquardt step of one parameter: the per-point
 # objective has a second minimum at a rough dielectric for rough metals
 # (and vice versa) that unbounded first steps jump into; measured on the
@@ -295,6 +300,7 @@ class FrequencySVBRDF(torch.nn.Module):
                visibility: str = 'auto', roughness_cells: int = 17,
                light_samples: int = 64, brdf_samples: int = 32,
                seed: int = 0, metallic_starts: bool = True,
+               max_views: Optional[int] = REFINE_MAX_VIEWS,
                progress: bool = True) -> SVBRDFResult:
         r"""Refines the current parameters (usually those of :meth:`fit`)
         against the observations with the full reflection integral of
@@ -355,6 +361,13 @@ class FrequencySVBRDF(torch.nn.Module):
                 roughness. (default: :obj:`32`)
             seed (int, optional): Seed of the integration samples.
                 (default: :obj:`0`)
+            max_views (int, optional): Most observations per point in the
+                tables and the solve (its brightest quarter and the views
+                that cover its reflections best, see
+                :func:`~tg_intrinsic.geometry.appearance.observations.observed_slots`);
+                :obj:`None` takes every one. The cost and memory of the
+                refinement follow the observations it holds.
+                (default: :data:`REFINE_MAX_VIEWS`)
             progress (bool, optional): Show a progress bar.
                 (default: :obj:`True`)
 
@@ -385,6 +398,8 @@ class FrequencySVBRDF(torch.nn.Module):
                                  "set 'data.envmap' [H, W, 3]")
         self._check_observations(data)
         start = time.perf_counter()
+        # per point, the views that see it: (N, K) in place of (N, V)
+        data = compact_observations(data, max_views)
         if metallic is not None:
             with torch.no_grad():
                 self.metallic.fill_(metallic)

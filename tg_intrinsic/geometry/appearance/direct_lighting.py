@@ -280,7 +280,9 @@ def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
         if 2 * grid_rows * grid_rows != cells:
             raise ValueError(f"'visibility' must hold an (R, 2R) grid of "
                              f"cells per point, got {cells} cells")
-        visibility = visibility.to(device=device, dtype=dtype)
+        # kept as booleans: a float copy of (N, cells) is the largest
+        # array of a big capture
+        visibility = visibility.to(device).bool()
 
     environment = _Environment(envmap)
 
@@ -289,14 +291,16 @@ def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
         coordinates ``(row, col)``."""
         if visibility is None:
             return torch.ones(row.shape, dtype=dtype, device=device)
-        cell = (row * (grid_rows / environment.height)).long().clamp(
-            0, grid_rows - 1) * (2 * grid_rows) + (col * (
-                2 * grid_rows / environment.width)).long().clamp(
-                    0, 2 * grid_rows - 1)
-        return visibility[points.view(-1, *([1] * (cell.dim() - 1))), cell]
+        cell = _visibility_cell(row, col, grid_rows, environment.height,
+                                environment.width)
+        return visibility[points.view(-1, *([1] * (cell.dim() - 1))),
+                          cell].to(dtype)
 
     frames = tangent_frames(normal)
-    irradiance = _irradiance(normal, environment, visible)
+    compiled = backend == 'numba' or (backend == 'auto'
+                                      and device.type == 'cpu')
+    irradiance = _irradiance_numba(normal, envmap, visibility, grid_rows) \
+        if compiled else _irradiance(normal, environment, visible)
     alpha = model_alpha(roughness).view(1, -1, 1)
 
     # environment samples: one set per point, shared by its views
@@ -310,19 +314,22 @@ def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
     point, view = mask.nonzero(as_tuple=True)
     uniforms = _uniforms(point.numel(), brdf_samples, 2, seed, 2, dtype,
                          device)
-    if backend == 'numba' or (backend == 'auto' and device.type == 'cpu'):
-        # one compiled pass, nothing per sample stored
+    if compiled:
+        # one compiled pass, nothing per sample stored; sums in float64,
+        # stored at the inputs' precision
         def numpy(t):
             return t.detach().cpu().to(torch.float64).contiguous().numpy()
-        tables = np.zeros((num, views, roughness.numel(), 2, 3))
-        no_grid = np.zeros((0, 0))
+        tables = np.zeros((num, views, roughness.numel(), 2, 3),
+                          dtype=np.float32 if dtype == torch.float32
+                          else np.float64)
+        no_grid = np.zeros((0, 0), dtype=np.uint8)
         _tables_kernel(
             numpy(frames), numpy(view_dirs), point.cpu().numpy(),
             view.cpu().numpy(),
             numpy(alpha.flatten()), numpy(uniforms), numpy(light_local),
             numpy(light), numpy(light_density), numpy(envmap),
             numpy(environment.pixel_density), no_grid if visibility is None
-            else numpy(visibility), grid_rows if visibility is not None
+            else _uint8(visibility), grid_rows if visibility is not None
             else 0, tables)
         return irradiance, torch.from_numpy(tables).to(device, dtype)
     tables = torch.zeros(num, views, roughness.numel(), 2, 3, dtype=dtype,
@@ -371,6 +378,80 @@ def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
                                            light[p].unsqueeze(1),
                                            light_density[p].unsqueeze(1))
     return irradiance, tables
+
+
+def _visibility_cell(row, col, grid_rows: int, height: int, width: int):
+    """The visibility cell (row-major on the (R, 2R) grid) of the map's
+    pixel coordinates ``(row, col)``."""
+    return (row * (grid_rows / height)).long().clamp(0, grid_rows - 1) \
+        * (2 * grid_rows) + (col * (2 * grid_rows / width)).long().clamp(
+            0, 2 * grid_rows - 1)
+
+
+def _uint8(visibility: Tensor) -> np.ndarray:
+    return visibility.detach().cpu().to(torch.uint8).contiguous().numpy()
+
+
+#: Most environment pixels the compiled irradiance sums over per point;
+#: a larger map is summed in blocks of 2 x 2 (its radiance times solid
+#: angle added up, at the block's centre) until it fits: the cosine moves
+#: by at most a block's width, 0.7 degrees at this size.
+IRRADIANCE_PIXELS = 256 * 512
+
+
+def _irradiance_numba(normal: Tensor, envmap: Tensor,
+                      visibility: Optional[Tensor], grid_rows: int
+                      ) -> Tensor:
+    r""":func:`_irradiance` compiled, on the CPU (the inputs are moved
+    there and the result back): per point, the sum over the pixels with
+    light that lie above its horizon and in a visible cell."""
+    light = envmap.detach().cpu().double() * equirect_solid_angles(
+        *envmap.shape[:2]).unsqueeze(-1)
+    while light.shape[0] * light.shape[1] > IRRADIANCE_PIXELS \
+            and light.shape[0] % 2 == 0 and light.shape[1] % 2 == 0:
+        height, width = light.shape[0] // 2, light.shape[1] // 2
+        light = light.view(height, 2, width, 2, 3).sum((1, 3))
+    height, width = light.shape[:2]
+    directions = equirect_directions(height, width).reshape(-1, 3)
+    light = light.reshape(-1, 3)
+    lit = (light > 0).any(1)
+    cell = np.zeros(0, dtype=np.int64)
+    grid = np.zeros((0, 0), dtype=np.uint8)
+    if visibility is not None:
+        row = (torch.arange(height, dtype=torch.float64) + 0.5)[:, None
+                                                                ].expand(
+            height, width).reshape(-1)
+        col = (torch.arange(width, dtype=torch.float64) + 0.5)[None, :
+                                                               ].expand(
+            height, width).reshape(-1)
+        cell = _visibility_cell(row, col, grid_rows, height, width)[lit
+                                                                    ].numpy()
+        grid = _uint8(visibility)
+    out = np.zeros((normal.size(0), 3))
+    _irradiance_kernel(normal.detach().cpu().double().contiguous().numpy(),
+                       directions[lit].contiguous().numpy(),
+                       light[lit].contiguous().numpy(), cell, grid, out)
+    return torch.from_numpy(out).to(normal.device, normal.dtype)
+
+
+@jit(parallel=True, fastmath=True)
+def _irradiance_kernel(normal, directions, light, cell, visibility,
+                       out):  # pragma: no cover (numba)
+    """Irradiance of every point: its light above the horizon, in the
+    visible cells when ``visibility`` has rows."""
+    shadowed = visibility.shape[0] > 0
+    for p in prange(normal.shape[0]):
+        nx, ny, nz = normal[p, 0], normal[p, 1], normal[p, 2]
+        red = green = blue = 0.0
+        for j in range(directions.shape[0]):
+            cosine = nx * directions[j, 0] + ny * directions[j, 1] \
+                + nz * directions[j, 2]
+            if cosine <= 0 or (shadowed and visibility[p, cell[j]] == 0):
+                continue
+            red += cosine * light[j, 0]
+            green += cosine * light[j, 1]
+            blue += cosine * light[j, 2]
+        out[p, 0], out[p, 1], out[p, 2] = red, green, blue
 
 
 def _irradiance(normal: Tensor, environment: _Environment, visible

@@ -173,3 +173,37 @@ def test_bad_and_imperfect_input():
     with pytest.warns(UserWarning, match='seen by no view'):
         out = ProjectViews()(one)
     assert (~out.obs_mask.any(1)).sum() > 500
+
+
+def test_photographs_streamed_from_disk_a_few_views_at_a_time(monkeypatch):
+    """Photographs in a PhotographStack are read a block of views at a
+    time, each once: the observations equal those of the tensor, whatever
+    the block size."""
+    from tg_intrinsic.geometry.appearance import PhotographStack
+    from tg_intrinsic.transforms import project_views
+    data = sphere_scene()
+    whole = ProjectViews()(data)
+    reads = []
+
+    def read(view):
+        reads.append(view)
+        return data.images[view].float()
+
+    for pixels in (SIZE * SIZE, 2 * SIZE * SIZE):
+        monkeypatch.setattr(project_views, 'VIEW_PIXELS', pixels)
+        reads.clear()
+        streamed = data.clone()
+        streamed.images = PhotographStack(read, 3, (SIZE, SIZE))
+        out = ProjectViews()(streamed)
+        assert sorted(reads) == [0, 1, 2]
+        # the stack holds float32 photographs; the tensor float64 ones
+        expected = ProjectViews()(data.clone().update(
+            {'images': data.images.float()}))
+        for key in ('obs_mask', 'obs_dir', 'obs_radiance'):
+            assert torch.equal(out[key], expected[key])
+        assert torch.equal(out.obs_mask, whole.obs_mask)
+    bad = data.clone()
+    bad.images = PhotographStack(lambda v: -data.images[v].float(), 3,
+                                 (SIZE, SIZE))
+    with pytest.raises(ValueError, match='infinite or negative'):
+        ProjectViews()(bad)

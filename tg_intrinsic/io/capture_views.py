@@ -29,6 +29,9 @@ import numpy as np
 import torch
 from torch_geometric.data import Data
 
+from tg_intrinsic.geometry.appearance.photograph_stack import \
+    PhotographStack
+
 from .capture_files import (ENVMAP_EXTENSIONS, HDR_EXTENSIONS,
                             find_single_file, read_envmap_file,
                             read_geometry_file, read_hdr_photograph)
@@ -172,8 +175,10 @@ def _surface_and_lighting(spec: CaptureSpec, geometry, envmap):
 
 
 def _photographs(spec: CaptureSpec, exposure, gamma):
-    """The photographs as one float32 tensor (V, H, W, 3), read one at a
-    time into it, and what was left out."""
+    """The photographs as a :class:`PhotographStack` that reads each view
+    from disk when asked (a capture's photographs are not held in memory
+    at once), after one pass that checks their sizes and counts what is
+    left out."""
     ldr = [not _is_hdr(view.image) for view in spec.views]
     if any(ldr) and exposure is None:
         first = spec.views[ldr.index(True)].image
@@ -183,45 +188,61 @@ def _photographs(spec: CaptureSpec, exposure, gamma):
             f"environment map's radiance (for example the ratio of a white "
             f"card's value in a photograph to the light the map gives it)")
     relative = _relative_exposures(spec, ldr)
-    images, size = None, None
+
+    def read(v: int):
+        return _read_view(spec.views[v], gamma, ldr[v],
+                          None if not ldr[v] else exposure * relative[v])
+
+    size, lit = None, False
     counts = {'masked': 0, 'clipped': 0, 'outside_after_undistortion': 0}
     for v, view in enumerate(spec.views):
-        image, clipped, alpha = _read_one(view.image, gamma, ldr[v])
+        image, left_out = read(v)
         if size is None:
-            size = image.shape[:2]
-            images = torch.empty((len(spec.views), ) + tuple(size) + (3, ),
-                                 dtype=torch.float32)
+            size = tuple(image.shape[:2])
         _check_size(view, image, size, spec)
-        if ldr[v]:
-            image = image / np.float32(exposure * relative[v])
-        mask = read_mask(view.mask, size=image.shape[:2]) \
-            if view.mask is not None else alpha
-        if mask is not None:
-            counts['masked'] += int((~mask).sum())
-            image[~mask] = np.nan
-        if clipped is not None:
-            counts['clipped'] += int((clipped & (mask if mask is not None
-                                                 else True)).sum())
-            image[clipped] = np.nan
-        image = torch.from_numpy(image)
-        if view.distortion is not None and np.any(view.distortion):
-            from tg_intrinsic.geometry.appearance.distortion import \
-                undistort_image
-            before = int(torch.isnan(image).any(-1).sum())
-            image = undistort_image(image, torch.from_numpy(view.K),
-                                    view.distortion)
-            counts['outside_after_undistortion'] += max(
-                0, int(torch.isnan(image).any(-1).sum()) - before)
-        images[v] = image
-    if not bool((images > 0).any()):
+        for key, value in left_out.items():
+            counts[key] += value
+        lit = lit or bool((image > 0).any())
+    if not lit:
         raise ValueError(f"no photograph of {spec.source} has a pixel above "
                          f"0 where it counts (inside the masks, unclipped)")
+    images = PhotographStack(lambda v: read(v)[0], len(spec.views), size,
+                             [view.image for view in spec.views])
     info = {'views': len(spec.views), 'ldr': bool(any(ldr)),
             'exposure': exposure, 'gamma': gamma,
             'relative_exposures': None if relative is None else
             [round(float(r), 6) for r in relative],
             'pixels_left_out': counts}
     return images, info
+
+
+def _read_view(view: CaptureView, gamma, ldr: bool, scale):
+    """One photograph as radiance, float32 (H, W, 3), NaN where it carries
+    none (outside its mask, clipped, outside after undistortion), and how
+    many pixels were left out and why."""
+    image, clipped, alpha = _read_one(view.image, gamma, ldr)
+    counts = {'masked': 0, 'clipped': 0, 'outside_after_undistortion': 0}
+    if scale is not None:
+        image = image / np.float32(scale)
+    mask = read_mask(view.mask, size=image.shape[:2]) \
+        if view.mask is not None else alpha
+    if mask is not None:
+        counts['masked'] = int((~mask).sum())
+        image[~mask] = np.nan
+    if clipped is not None:
+        counts['clipped'] = int((clipped & (mask if mask is not None
+                                            else True)).sum())
+        image[clipped] = np.nan
+    image = torch.from_numpy(image)
+    if view.distortion is not None and np.any(view.distortion):
+        from tg_intrinsic.geometry.appearance.distortion import \
+            undistort_image
+        before = int(torch.isnan(image).any(-1).sum())
+        image = undistort_image(image, torch.from_numpy(view.K),
+                                view.distortion)
+        counts['outside_after_undistortion'] = max(
+            0, int(torch.isnan(image).any(-1).sum()) - before)
+    return image, counts
 
 
 def _is_hdr(path: str) -> bool:

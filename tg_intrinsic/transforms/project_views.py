@@ -1,6 +1,7 @@
 import warnings
 
 import torch
+from torch import Tensor
 from torch_geometric.data import Data
 from torch_geometric.data.datapipes import functional_transform
 
@@ -11,8 +12,14 @@ from tg_intrinsic.geometry.appearance.cameras import (camera_centers, project,
 from tg_intrinsic.geometry.appearance.dynamic_range import looks_clipped
 from tg_intrinsic.geometry.checks import (check_cameras, check_points,
                                           check_positive_float, check_tensor)
+from tg_intrinsic.geometry.appearance.photograph_stack import \
+    PhotographStack
 from tg_intrinsic.surface_attributes import given_normals
 from tg_intrinsic.transforms._batching import GraphTransform
+
+#: Pixels of the photographs projected into at once (a block of views):
+#: 16 megapixels, 8 photographs of 1600 x 1200.
+VIEW_PIXELS = 2 ** 24
 
 
 @functional_transform('project_views')
@@ -87,11 +94,12 @@ class ProjectViews(GraphTransform):
             raise ValueError("ProjectViews needs 'data.images' [V, H, W, 3] "
                              "(linear HDR photographs) with "
                              "'data.intrinsics' and 'data.extrinsics'")
-        images = check_tensor(images, 'images')
+        if not isinstance(images, PhotographStack):
+            images = check_tensor(images, 'images')
         if images.dim() != 4 or images.size(-1) != 3:
             raise ValueError(f"'images' must have shape [V, H, W, 3], got "
                              f"{list(images.shape)}")
-        if not images.is_floating_point():
+        if not images.dtype.is_floating_point:
             raise ValueError(f"'images' must hold floating-point linear "
                              f"radiance, got {images.dtype}; 8-bit images "
                              f"are not HDR")
@@ -101,28 +109,72 @@ class ProjectViews(GraphTransform):
         if images.size(0) != num_views:
             raise ValueError(f"there are {images.size(0)} images but "
                              f"{num_views} cameras")
-        finite = torch.isfinite(images) | torch.isnan(images)
-        if not bool(finite.all()) or bool((images < 0).any()):
-            raise ValueError("'images' hold infinite or negative radiance; "
-                             "linear HDR photographs must be finite and >= 0 "
-                             "(mark missing pixels as NaN)")
-        if looks_clipped(images):
+        height, width = images.shape[1:3]
+        intrinsics = data.intrinsics.to(pos.dtype)
+        extrinsics = data.extrinsics.to(pos.dtype)
+        scale = (pos - pos.mean(0)).norm(dim=-1).max().clamp_min(1e-12)
+        spacing = self._spacing(pos)
+        radiance = pos.new_zeros(pos.size(0), num_views, 3)
+        direction = pos.new_zeros(pos.size(0), num_views, 3)
+        mask = torch.zeros(pos.size(0), num_views, dtype=torch.bool,
+                           device=pos.device)
+        stream = isinstance(images, PhotographStack)
+        # a tensor is checked whole, before any work; a stack as it is read
+        clipped, lost = (False if stream else self._check_radiance(images)
+                         ), 0
+        # a few views at a time: the photographs (read from disk when they
+        # are a PhotographStack) and the depth buffers of a big capture do
+        # not fit in memory at once
+        step = max(1, VIEW_PIXELS // (height * width))
+        for start in range(0, num_views, step):
+            views = slice(start, min(start + step, num_views))
+            block = images[views]
+            if stream:
+                clipped |= self._check_radiance(block)
+            out = self._project(pos, normal, block.to(pos.device, pos.dtype),
+                                intrinsics[views], extrinsics[views], scale,
+                                spacing)
+            radiance[:, views], direction[:, views], mask[:, views] = \
+                (value.transpose(0, 1) for value in out[:3])
+            lost += out[3]
+        if clipped:
             warnings.warn("the images look 8-bit or clipped (values on a "
                           "1/255 grid or piled up at their maximum); the "
                           "recovery assumes linear, unclipped HDR radiance, "
                           "so highlights will be underestimated",
                           stacklevel=2)
-        height, width = images.shape[1:3]
-        intrinsics = data.intrinsics.to(pos.dtype)
-        extrinsics = data.extrinsics.to(pos.dtype)
+        if lost:
+            warnings.warn(f"{lost} observation(s) touch NaN pixels and are "
+                          f"masked out", stacklevel=2)
+        self._check_seen(mask)
+        data = data.clone()
+        data.obs_radiance = radiance
+        data.obs_dir = direction
+        data.obs_mask = mask
+        return data
 
+    @staticmethod
+    def _check_radiance(images: Tensor) -> bool:
+        """Refuses infinite or negative radiance; whether the photographs
+        look 8-bit or clipped."""
+        finite = torch.isfinite(images) | torch.isnan(images)
+        if not bool(finite.all()) or bool((images < 0).any()):
+            raise ValueError("'images' hold infinite or negative radiance; "
+                             "linear HDR photographs must be finite and >= 0 "
+                             "(mark missing pixels as NaN)")
+        return looks_clipped(images)
+
+    def _project(self, pos, normal, images, intrinsics, extrinsics, scale,
+                 spacing):
+        """The observations of a block of views, view-major: radiance
+        (v, N, 3), directions (v, N, 3), mask (v, N), and how many
+        observations touched NaN pixels."""
+        num_views, height, width = images.shape[:3]
         uv, depth = project(pos, intrinsics, extrinsics)
-        centre = pos.mean(0)
-        scale = (pos - centre).norm(dim=-1).max().clamp_min(1e-12)
         inside = (depth > 1e-6 * scale) & (uv[..., 0] >= 0) \
             & (uv[..., 0] < width) & (uv[..., 1] >= 0) & (uv[..., 1] < height)
         centers = camera_centers(extrinsics)
-        to_camera = centers.unsqueeze(1) - pos.unsqueeze(0)  # (V, N, 3)
+        to_camera = centers.unsqueeze(1) - pos.unsqueeze(0)  # (v, N, 3)
         direction = to_camera / to_camera.norm(dim=-1, keepdim=True
                                                ).clamp_min(1e-30)
         if normal is not None:
@@ -133,7 +185,7 @@ class ProjectViews(GraphTransform):
         else:
             slope = torch.ones_like(depth)
 
-        radius = self._radius(pos, intrinsics, depth)
+        radius = self._radius(spacing, intrinsics, depth)
         buffer = splat_depth(uv, depth, inside, radius, height, width)
         col = uv[..., 0].floor().long().clamp(0, width - 1)
         row = uv[..., 1].floor().long().clamp(0, height - 1)
@@ -144,17 +196,18 @@ class ProjectViews(GraphTransform):
         tolerance = self.depth_tolerance * scale + 2 * footprint * slope
         mask = inside & (depth <= nearest + tolerance)
 
-        radiance, nan = sample_images(images.to(pos.dtype), uv)
+        radiance, nan = sample_images(images, uv)
         lost = mask & nan
-        if bool(lost.any()):
-            warnings.warn(f"{int(lost.sum())} observation(s) touch NaN pixels "
-                          f"and are masked out", stacklevel=2)
-            mask &= ~nan
+        mask &= ~nan
         radiance = torch.where(mask.unsqueeze(-1), radiance,
                                torch.zeros_like(radiance))
+        return radiance, direction, mask, int(lost.sum())
 
-        seen = mask.any(0)
-        views_seeing = mask.any(1)
+    @staticmethod
+    def _check_seen(mask: Tensor):
+        """Errors and warnings on what the views see, (N, V)."""
+        seen = mask.any(1)
+        views_seeing = mask.any(0)
         if not bool(views_seeing.any()):
             raise ValueError("no camera sees any point: check that the "
                              "extrinsics are world-to-camera [R | t] (OpenCV, "
@@ -164,29 +217,30 @@ class ProjectViews(GraphTransform):
             blind = (~views_seeing).nonzero().flatten().tolist()
             warnings.warn(f"camera(s) {blind[:10]} see no point (behind the "
                           f"object or looking away); they are ignored",
-                          stacklevel=2)
+                          stacklevel=3)
         if not bool(seen.all()):
             warnings.warn(f"{int((~seen).sum())} of {seen.numel()} points are "
                           f"seen by no view; their outgoing radiance is "
                           f"unknown and their entropy will be 1",
-                          stacklevel=2)
-        data = data.clone()
-        data.obs_radiance = radiance.transpose(0, 1).contiguous()
-        data.obs_dir = direction.transpose(0, 1).contiguous()
-        data.obs_mask = mask.t().contiguous()
-        return data
+                          stacklevel=3)
 
-    def _radius(self, pos, intrinsics, depth):
-        """Splat half-widths (V, N): 0.75 of each point's own spacing (its
-        nearest-neighbour distance, at most 3 median spacings) in pixels."""
-        if self.splat_radius is not None:
-            return torch.full_like(depth, self.splat_radius, dtype=torch.long)
-        if pos.size(0) < 2:
-            return torch.zeros_like(depth, dtype=torch.long)
+    def _spacing(self, pos):
+        """Each point's own spacing: its nearest-neighbour distance, at
+        most 3 median spacings (None with a fixed splat radius)."""
+        if self.splat_radius is not None or pos.size(0) < 2:
+            return None
         edge = knn(pos, 1)
         spacing = torch.zeros(pos.size(0), dtype=pos.dtype, device=pos.device)
         spacing[edge[1]] = (pos[edge[0]] - pos[edge[1]]).norm(dim=-1)
-        spacing = spacing.clamp_max(3 * spacing.median())
+        return spacing.clamp_max(3 * spacing.median())
+
+    def _radius(self, spacing, intrinsics, depth):
+        """Splat half-widths (V, N): 0.75 of each point's spacing in
+        pixels."""
+        if self.splat_radius is not None:
+            return torch.full_like(depth, self.splat_radius, dtype=torch.long)
+        if spacing is None:
+            return torch.zeros_like(depth, dtype=torch.long)
         focal = intrinsics[:, 0, 0].unsqueeze(1)
         pixels = 0.75 * spacing * focal / depth.clamp_min(1e-12)
         return pixels.ceil().clamp(0, 8).long()

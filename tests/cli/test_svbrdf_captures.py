@@ -110,3 +110,38 @@ def test_show_cameras_writes_the_figure_and_stops(capsys, tmp_path):
     assert 'cameras.png' in out
     report = json.loads((tmp_path / 'out' / 'report.json').read_text())
     assert report['capture']['format'] == 'colmap'
+
+
+def test_photographs_are_streamed_not_held(capsys, tmp_path, monkeypatch):
+    """The recovery reads a capture's photographs a block of views at a
+    time: never more than a block at once, each view once from the stack
+    (the projection; the reader's checking pass reads and drops each
+    before), and the maps equal those of the photographs projected at
+    once."""
+    from tg_intrinsic.geometry.appearance import photograph_stack
+    from tg_intrinsic.transforms import project_views
+    capture = example(capsys, tmp_path / 'capture', '--format', 'colmap',
+                      '--ldr')
+    whole, _ = recover(capsys, capture, tmp_path / 'whole')
+    reads, blocks = [], []
+    view = photograph_stack.PhotographStack._view
+    stack_getitem = photograph_stack.PhotographStack.__getitem__
+
+    def counted(self, index):
+        reads.append(index)
+        return view(self, index)
+
+    def block(self, index):
+        if isinstance(index, slice):
+            blocks.append(len(range(*index.indices(len(self)))))
+        return stack_getitem(self, index)
+    monkeypatch.setattr(photograph_stack.PhotographStack, '_view', counted)
+    monkeypatch.setattr(photograph_stack.PhotographStack, '__getitem__',
+                        block)
+    # two photographs of 24 x 24 at a time
+    monkeypatch.setattr(project_views, 'VIEW_PIXELS', 2 * 24 * 24)
+    streamed, _ = recover(capsys, capture, tmp_path / 'streamed')
+    assert blocks == [2, 2, 2]
+    assert sorted(reads) == list(range(6))
+    for name, value in whole.items():
+        np.testing.assert_array_equal(streamed[name], value, err_msg=name)

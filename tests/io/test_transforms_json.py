@@ -91,3 +91,49 @@ def test_applied_transform_is_undone(capture, native, tmp_path):
     assert torch.allclose(data.extrinsics, native.extrinsics, atol=1e-6)
     assert any('applied_transform undone' in note
                for note in data.capture_info['notes'])
+
+
+def test_each_frame_may_name_its_own_environment_map(capture, tmp_path):
+    """hdri_path (the NeRD datasets): the maps in order of first use, the
+    map of each view, --envmap lighting them all, and mistakes named."""
+    import shutil
+    from tg_intrinsic.io.hdr import read_envmap, write_hdr
+    written = write_capture(tmp_path / 'c', capture, 'nerfstudio')
+    folder = written['capture']
+    path = os.path.join(folder, 'transforms.json')
+    spec = json.loads(open(path).read())
+    envmap = [name for name in os.listdir(folder)
+              if name.startswith('envmap')][0]
+    sky = np.asarray(read_envmap(os.path.join(folder, envmap)))
+    write_hdr(os.path.join(folder, 'dusk.hdr'), 0.5 * sky[:, ::-1])
+    names = ['dusk.hdr', envmap, 'dusk.hdr', envmap, envmap]
+    for frame, name in zip(spec['frames'], names):
+        frame['hdri_path'] = name
+    open(path, 'w').write(json.dumps(spec))
+    data = read_capture(folder, dtype=torch.float64)
+    assert 'envmap' not in data and data.envmaps.shape[0] == 2
+    assert data.view_lighting.tolist() == [0, 1, 0, 1, 1]
+    assert torch.allclose(data.envmaps[1], torch.as_tensor(sky).double())
+    # dusk.hdr: RGBE, 8-bit mantissas shared by a pixel's channels
+    assert torch.allclose(data.envmaps[0], 0.5 * torch.as_tensor(
+        sky[:, ::-1].copy()).double(), rtol=0.02, atol=0.005)
+    assert len(data.capture_info['lightings']) == 2
+    one = read_capture(folder, envmap=os.path.join(folder, envmap))
+    assert 'envmaps' not in one and '--envmap lights every' in \
+        one.capture_info['notes'][-1]
+    # a frame without a map, a missing map, maps of two sizes
+    del spec['frames'][3]['hdri_path']
+    open(path, 'w').write(json.dumps(spec))
+    with pytest.raises(ValueError, match='but not for 1'):
+        read_capture(folder)
+    spec['frames'][3]['hdri_path'] = 'nowhere.hdr'
+    open(path, 'w').write(json.dumps(spec))
+    with pytest.raises(ValueError, match="frame 3 names the environment map"
+                                         " 'nowhere.hdr'"):
+        read_capture(folder)
+    write_hdr(os.path.join(folder, 'small.hdr'), sky[::2, ::2])
+    spec['frames'][3]['hdri_path'] = 'small.hdr'
+    open(path, 'w').write(json.dumps(spec))
+    with pytest.raises(ValueError, match='resample them to one size'):
+        read_capture(folder)
+    shutil.rmtree(folder)

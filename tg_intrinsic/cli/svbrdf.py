@@ -518,11 +518,17 @@ def _recover(args, data, truth, device, seconds, start, out,
         'triangles': None if face is None else int(face.size(1)),
         'views': int(data.images.size(0)),
         'image_size': list(data.images.shape[1:3]),
-        'envmap_size': list(data.envmap.shape[:2]),
+        'envmap_size': list((data.envmap if 'envmap' in data
+                             else data.envmaps[0]).shape[:2]),
+        'lightings': 1 if 'envmap' in data else int(data.envmaps.size(0)),
         'observations_per_point': {
             'min': int(seen.min()), 'median': float(seen.median()),
             'mean': round(float(seen.mean()), 3), 'max': int(seen.max()),
-            'unseen_points': int((seen == 0).sum())},
+            'unseen_points': int((seen == 0).sum()),
+            # seen by a camera, but on a pixel left out (capture's
+            # pixels_left_out says why)
+            'left_out': int(data.obs_left_out.sum())
+            if 'obs_left_out' in data else 0},
         'pipeline': {
             'steps': list(pipeline['seconds']),
             'fit': pipeline['fit'], 'refine': pipeline['refine'],
@@ -752,9 +758,13 @@ def _print_summary(out: str, report: dict):
                      f"{fit['steps']} steps in {seconds['fit']:.1f} s")
     if pipeline['refine'] is not None:
         refine = pipeline['refine']
+        cap = refine.get('max_views')
         lines.append(f"refinement against the full integral: "
                      f"{refine['steps']} steps in {seconds['refine']:.1f} s "
-                     f"({refine['visibility']} visibility)")
+                     f"({refine['visibility']} visibility, "
+                     f"{refine['observations']:,} observations"
+                     + ('' if cap is None else f", at most {cap} per point")
+                     + ')')
     else:
         lines.append(f"not refined: {pipeline['not_refined_because']}")
     for name, (first, last) in report['loss'].items():

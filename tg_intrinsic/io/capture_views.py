@@ -61,6 +61,9 @@ class CaptureView:
     mask: Optional[str] = None
     #: (H, W) the format declares for the photograph, or None
     size: Optional[Tuple[int, int]] = None
+    #: the environment map this photograph was lit by, where the format
+    #: gives each its own (transforms.json's ``hdri_path``), or None
+    envmap: Optional[str] = None
 
 
 @dataclass
@@ -119,19 +122,35 @@ def assemble_capture(spec: CaptureSpec, geometry=None, envmap=None,
                                      exposure > 0):
         raise ValueError(f"the exposure must be a positive number, got "
                          f"{exposure!r}")
-    geometry_path, envmap_path = _surface_and_lighting(spec, geometry,
-                                                       envmap)
+    per_view = _per_view_lighting(spec, envmap)
+    geometry_path, envmap_path = _surface_and_lighting(
+        spec, geometry, envmap if per_view is None else per_view[0][0])
     named = {'geometry': 'given with --geometry' if geometry else
              f'of {spec.source}',
              'envmap': 'given with --envmap' if envmap else
              f'of {spec.source}'}
     pos, face, normal, face_uv = read_geometry_file(geometry_path,
                                                     named['geometry'])
-    lighting = read_envmap_file(envmap_path, named['envmap'])
-    if spec.envmap_convention == 'blender':
-        lighting = blender_envmap(lighting)
-    if envmap_rotation:
-        lighting = rotate_envmap(lighting, envmap_rotation)
+
+    def light(path: str, named: str):
+        lighting = read_envmap_file(path, named)
+        if spec.envmap_convention == 'blender':
+            lighting = blender_envmap(lighting)
+        if envmap_rotation:
+            lighting = rotate_envmap(lighting, envmap_rotation)
+        return lighting.to(dtype)
+    if per_view is None:
+        lighting = light(envmap_path, named['envmap'])
+    else:
+        paths, view_lighting = per_view
+        maps = [light(path, f'named by {spec.source}') for path in paths]
+        for path, lighting in zip(paths, maps):
+            if lighting.shape != maps[0].shape:
+                raise ValueError(
+                    f"the environment maps of {spec.source} differ in size: "
+                    f"'{path}' is {lighting.shape[0]} x {lighting.shape[1]}"
+                    f" but '{paths[0]}' {maps[0].shape[0]} x "
+                    f"{maps[0].shape[1]}; resample them to one size")
     images, info = _photographs(spec, exposure, gamma)
     rotation = np.stack([view.R for view in spec.views])
     translation = np.stack([view.t for view in spec.views])
@@ -144,8 +163,12 @@ def assemble_capture(spec: CaptureSpec, geometry=None, envmap=None,
     extrinsics = torch.as_tensor(np.concatenate(
         [rotation, translation[:, :, None]], 2), dtype=dtype)
     data = Data(pos=pos.to(dtype), normal=normal.to(dtype), images=images,
-                intrinsics=intrinsics, extrinsics=extrinsics,
-                envmap=lighting.to(dtype))
+                intrinsics=intrinsics, extrinsics=extrinsics)
+    if per_view is None:
+        data.envmap = lighting
+    else:  # each photograph under its own map
+        data.envmaps = torch.stack(maps)
+        data.view_lighting = torch.tensor(view_lighting)
     if face is not None:
         data.face = face
     if face_uv is not None:
@@ -155,8 +178,33 @@ def assemble_capture(spec: CaptureSpec, geometry=None, envmap=None,
                 geometry=osp.abspath(geometry_path),
                 envmap=osp.abspath(envmap_path), up=up,
                 envmap_rotation=float(envmap_rotation))
+    if per_view is not None:
+        info['lightings'] = [osp.abspath(path) for path in per_view[0]]
+        info['notes'].append(f'{len(per_view[0])} environment maps, one per '
+                             f'photograph as the frames name them')
+    elif any(view.envmap for view in spec.views):
+        info['notes'].append('--envmap lights every photograph (the frames '
+                             'name their own maps)')
     data.capture_info = info
     return data
+
+
+def _per_view_lighting(spec: CaptureSpec, envmap):
+    """``(maps, the map of each view)`` where the format gives each
+    photograph its own environment map (and --envmap does not replace
+    them), else None."""
+    named = [view.envmap for view in spec.views]
+    if envmap is not None or not any(named):
+        return None
+    if not all(named):
+        missing = [v for v, path in enumerate(named) if not path]
+        raise ValueError(
+            f"{spec.source} names an environment map for some photographs "
+            f"but not for {len(missing)} (the first: "
+            f"'{spec.views[missing[0]].image}'); name one for every "
+            f"photograph, or light them all with --envmap MAP")
+    maps = list(dict.fromkeys(named))
+    return maps, [maps.index(path) for path in named]
 
 
 def _surface_and_lighting(spec: CaptureSpec, geometry, envmap):

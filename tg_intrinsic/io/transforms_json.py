@@ -19,6 +19,10 @@ write it).
   that world. ``cx, cy`` are continuous coordinates (nerfstudio's rays
   pass through pixel + 0.5), taken as they are.
 
+Either may give a frame its own environment map, ``hdri_path`` (relative
+to the file, as the NeRD datasets do): every photograph is then recovered
+under its own lighting (``data.envmaps`` and ``data.view_lighting``).
+
 Both turn into OpenCV cameras (:math:`R_{cv} = R_{gl}\,
 \mathrm{diag}(1, -1, -1)`) with pixel centres at half-integers.
 """
@@ -228,7 +232,16 @@ def transforms_spec(path, style: Optional[str] = None) -> CaptureSpec:
                 raise ValueError(f"{where} names the mask "
                                  f"'{frame['mask_path']}', but '{mask}' "
                                  f"{why}")
-        views.append(CaptureView(image, K, R, t, distortion, mask, size))
+        lighting = frame.get('hdri_path')
+        if lighting is not None:
+            lighting = osp.normpath(osp.join(folder, str(lighting)))
+            why = why_not_a_file(lighting)
+            if why:
+                raise ValueError(f"{where} names the environment map "
+                                 f"'{frame['hdri_path']}', but '{lighting}'"
+                                 f" {why}")
+        views.append(CaptureView(image, K, R, t, distortion, mask, size,
+                                 lighting))
     notes = [] if undo is None else [
         'applied_transform undone: cameras in the original world']
     return CaptureSpec(style, path, folder, views,

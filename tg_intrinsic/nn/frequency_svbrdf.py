@@ -10,6 +10,7 @@ from torch_geometric.data import Data
 from tg_intrinsic.geometry import knn, mesh_edges
 from tg_intrinsic.geometry.appearance.direct_lighting import (
     direction_visibility, reflection_tables)
+from tg_intrinsic.geometry.appearance.envmap import view_lightings
 from tg_intrinsic.geometry.appearance.brdf import (
     MIN_ALPHA, dominant_direction, lobe_degree_sums, model_alpha,
     principled_reflectance, principled_reflectance_jacobian, sh_reflectance)
@@ -36,8 +37,12 @@ DEFAULT_L_MAX = {'eq5.11': 5, 'split_sum': 8}
 #: Levenberg-Marquardt iterations per round of the refinement.
 REFINE_STEPS = 10
 #: Most observations per point in the refinement (see
-#: :meth:`FrequencySVBRDF.refine`).
+#: :meth:`FrequencySVBRDF.refine`), and the observations it holds in all
+#: with ``max_views='auto'``: a capture of more points keeps fewer per
+#: point, down to 8 (its time and memory follow the observations: about
+#: 30 microseconds and 400 bytes each on 2 CPU cores).
 REFINE_MAX_VIEWS = 32
+REFINE_OBSERVATIONS = 3_000_000
 # Longest Levenberg-Marquardt step of one parameter: the per-point
 # objective has a second minimum at a rough dielectric for rough metals
 # (and vice versa) that unbounded first steps jump into; measured on the
@@ -47,7 +52,7 @@ MAX_STEP = 0.05
 #: the total variation as quadratic (Huber): the L1 weights of smaller
 #: differences would otherwise glue neighbours together.
 TV_EPSILON = 0.02
-_NEEDED = ('sh_in', 'light_radiance', 'mirror_dir', 'irradiance',
+_NEEDED = ('sh_in', 'mirror_dir', 'irradiance',
            'obs_radiance', 'obs_mask', 'sh_prefilter')
 
 
@@ -163,6 +168,11 @@ class FrequencySVBRDF(torch.nn.Module):
         roughness (no gradient: refitted every few steps, as the
         original). :math:`G_\alpha` is 0 below the horizon."""
         dtype = data.sh_in.dtype
+        if getattr(data, 'light_radiance', None) is None:
+            raise ValueError("the shadowing refit needs 'data.light_radiance'"
+                             "; run FitSphericalHarmonics with "
+                             "store_light_radiance=True (its default), or "
+                             "fit with shadowing=False")
         light = data.light_radiance.to(dtype)
         l_max = int(round(math.sqrt(data.sh_in.size(1)))) - 1
         local = light_directions(light.size(1), dtype, light.device)
@@ -267,6 +277,13 @@ class FrequencySVBRDF(torch.nn.Module):
         check_choice(init, 'init', ('spectrum', 'constant'))
         self._check_metallic(metallic)
         self._check(data)
+        if view_lightings(data) is not None:
+            raise ValueError(
+                "fit models one lighting, but the views of this capture are "
+                "lit by several maps ('data.envmaps'); refine (the full "
+                "integral) takes each view's own map, or fit each "
+                "lighting's views on their own and merge the results "
+                "(SVBRDFResult.merge_by_uncertainty)")
         self._texels(data)  # validated before the work
         self._check_observations(data)
         start = time.perf_counter()
@@ -300,7 +317,7 @@ class FrequencySVBRDF(torch.nn.Module):
                visibility: str = 'auto', roughness_cells: int = 17,
                light_samples: int = 64, brdf_samples: int = 32,
                seed: int = 0, metallic_starts: bool = True,
-               max_views: Optional[int] = REFINE_MAX_VIEWS,
+               max_views: Union[int, str, None] = 'auto',
                progress: bool = True) -> SVBRDFResult:
         r"""Refines the current parameters (usually those of :meth:`fit`)
         against the observations with the full reflection integral of
@@ -361,13 +378,15 @@ class FrequencySVBRDF(torch.nn.Module):
                 roughness. (default: :obj:`32`)
             seed (int, optional): Seed of the integration samples.
                 (default: :obj:`0`)
-            max_views (int, optional): Most observations per point in the
-                tables and the solve (its brightest quarter and the views
-                that cover its reflections best, see
+            max_views (int or str, optional): Most observations per point
+                in the tables and the solve (its brightest quarter and the
+                views that cover its reflections best, see
                 :func:`~tg_intrinsic.geometry.appearance.observations.observed_slots`);
-                :obj:`None` takes every one. The cost and memory of the
-                refinement follow the observations it holds.
-                (default: :data:`REFINE_MAX_VIEWS`)
+                :obj:`None` takes every one; :obj:`'auto'`
+                :data:`REFINE_MAX_VIEWS`, fewer (down to 8) where the
+                points would hold more than :data:`REFINE_OBSERVATIONS`
+                in all. The cost and memory of the refinement follow the
+                observations it holds. (default: :obj:`'auto'`)
             progress (bool, optional): Show a progress bar.
                 (default: :obj:`True`)
 
@@ -391,7 +410,9 @@ class FrequencySVBRDF(torch.nn.Module):
             if getattr(data, key, None) is None:
                 raise ValueError(f"'data.{key}' is missing; prepare the data "
                                  f"with ProjectViews")
-        if envmap is None:
+        # one lighting (envmap, data.envmap) or one per view (data.envmaps)
+        lightings = None if envmap is not None else view_lightings(data)
+        if envmap is None and lightings is None:
             envmap = getattr(data, 'envmap', None)
             if envmap is None:
                 raise ValueError("refine needs the light: pass 'envmap' or "
@@ -399,6 +420,9 @@ class FrequencySVBRDF(torch.nn.Module):
         self._check_observations(data)
         start = time.perf_counter()
         # per point, the views that see it: (N, K) in place of (N, V)
+        if max_views == 'auto':
+            max_views = min(REFINE_MAX_VIEWS, max(
+                8, REFINE_OBSERVATIONS // max(data.num_nodes, 1)))
         data = compact_observations(data, max_views)
         if metallic is not None:
             with torch.no_grad():
@@ -426,11 +450,9 @@ class FrequencySVBRDF(torch.nn.Module):
                               dtype=dtype, device=data.sh_in.device)
         # single precision: the tables are Monte Carlo estimates (about 1%
         # noise), and float32 halves their cost
-        single = torch.float32
-        irradiance, tables = reflection_tables(
-            data.normal.to(single), data.obs_dir.to(single),
-            data.obs_mask.bool(), envmap.to(single), grid.to(single),
-            visible, light_samples, brdf_samples, seed)
+        irradiance, tables = _lit_tables(
+            data, envmap, lightings, grid.to(torch.float32), visible,
+            light_samples, brdf_samples, seed)
         parts['tables'] = time.perf_counter() - start - parts['visibility']
         # the tables stay single precision (half the memory of the largest
         # array of a refinement); what is read of them is cast to dtype
@@ -447,7 +469,9 @@ class FrequencySVBRDF(torch.nn.Module):
         parts['solve'] = result.seconds - parts['visibility'] - \
             parts['tables']
         result.pipeline = {'seconds': {
-            key: round(value, 3) for key, value in parts.items()}}
+            key: round(value, 3) for key, value in parts.items()},
+            'max_views': max_views,
+            'observations': int(data.obs_mask.sum())}
         return result
 
     def recover(self, data: Data, refine: Union[str, bool] = 'auto',
@@ -534,7 +558,8 @@ class FrequencySVBRDF(torch.nn.Module):
         has_mesh = getattr(data, 'face', None) is not None or \
             getattr(data, 'mesh_face', None) is not None
         reason = None
-        if getattr(data, 'envmap', None) is None:
+        lightings = view_lightings(data)
+        if getattr(data, 'envmap', None) is None and lightings is None:
             reason = "the capture has no environment map ('data.envmap')"
         elif not has_mesh and visibility != 'horizon':
             reason = ("a point cloud without a mesh, whose occlusion is "
@@ -542,6 +567,15 @@ class FrequencySVBRDF(torch.nn.Module):
                       "horizon visibility)")
         elif refine_steps == 0:
             reason = 'refine_steps is 0'
+        if lightings is not None:
+            several = ("the views are lit by several maps ('data.envmaps'),"
+                       " which only the refinement models")
+            if refine is False or reason is not None:
+                raise ValueError(f"{several}, and it cannot run: "
+                                 f"{reason or 'not asked for'}")
+            if solver is not None or steps is not None:
+                raise ValueError(f"{several}; the spherical-harmonic fit "
+                                 f"(solver, steps) does not apply")
         if refine is True and reason is not None:
             raise ValueError(f"the refinement cannot run: {reason}")
         refining = refine is not False and reason is None
@@ -562,16 +596,34 @@ class FrequencySVBRDF(torch.nn.Module):
         if getattr(data, 'obs_radiance', None) is None:
             data = step('projecting the points into the views', 'project',
                         lambda: ProjectViews()(data))
+        if lightings is not None and getattr(data, 'sh_in', None) is None:
+            # the spectra of each lighting's views; each point starts from
+            # the lighting whose spectrum is the most certain (lowest
+            # entropy), then the refinement takes every view under its map
+            parts = step(f'fitting spherical harmonics per lighting (l_max '
+                         f'= {l_max})', 'fit_spherical_harmonics',
+                         lambda: [(views, FitSphericalHarmonics(
+                             l_max=l_max, store_light_radiance=False)(part))
+                             for views, part in
+                             _one_lighting_captures(data, lightings)])
+            data = step('spectral uncertainty per lighting',
+                        'spectral_uncertainty',
+                        lambda: _lowest_entropy_start(data, [
+                            (views, SpectralUncertainty(
+                                store_likelihood=False)(part))
+                            for views, part in parts]))
+        fitting = not refining or solver is not None or steps is not None
+        # the light samples serve the shadowing refit of fit() alone
+        harmonics = FitSphericalHarmonics(l_max=l_max,
+                                          store_light_radiance=fitting)
         if getattr(data, 'sh_in', None) is None:
             data = step(f'fitting spherical harmonics (l_max = {l_max})',
-                        'fit_spherical_harmonics',
-                        lambda: FitSphericalHarmonics(l_max=l_max)(data))
+                        'fit_spherical_harmonics', lambda: harmonics(data))
         if getattr(data, 'entropy', None) is None or \
                 getattr(data, 'init_roughness', None) is None:
             data = step('spectral uncertainty', 'spectral_uncertainty',
                         lambda: SpectralUncertainty(
                             store_likelihood=False)(data))
-        fitting = not refining or solver is not None or steps is not None
         solver = 'lm' if solver is None else solver
         steps = DEFAULT_STEPS[solver] if steps is None else steps
         loss = {}
@@ -594,7 +646,7 @@ class FrequencySVBRDF(torch.nn.Module):
                                               visibility=visibility,
                                               progress=progress))
             loss['refine'] = [result.loss[0], result.loss[-1]]
-            refine_parts = result.pipeline['seconds']
+            refine_parts = result.pipeline
         result.seconds = time.perf_counter() - start
         result.pipeline = {
             'steps': list(seconds), 'seconds': seconds,
@@ -602,7 +654,7 @@ class FrequencySVBRDF(torch.nn.Module):
             'refine': {'steps': refine_steps,
                        'visibility': 'geometry' if has_mesh
                        and visibility != 'horizon' else 'horizon',
-                       'seconds': refine_parts}
+                       **refine_parts}
             if refining else None,
             'not_refined_because': None if refining else reason,
             'loss': loss,
@@ -693,11 +745,10 @@ class FrequencySVBRDF(torch.nn.Module):
                     residual, x0, problem.weight_rows, *bounds, loss='l1',
                     jacobian=jacobian, **options)
             else:  # coupled by the total variation
-                rows = torch.arange(x0.size(0), device=x0.device)
                 x, _ = levenberg_marquardt_tv(
-                    lambda x: jacobian(x, rows), x0, problem.weight_rows,
-                    problem.edges, problem.tv_weight / problem.edges.size(1),
-                    *bounds, tv_epsilon=TV_EPSILON, **options)
+                    jacobian, x0, problem.weight_rows, problem.edges,
+                    problem.tv_weight / problem.edges.size(1), *bounds,
+                    tv_epsilon=TV_EPSILON, rows_per_call=LM_ROWS, **options)
             with torch.no_grad():
                 every[:, columns] = x.to(every)
                 self.base_color.copy_(every[:, :3])
@@ -984,6 +1035,10 @@ class _Problem:
         return residual, jacobian
 
 
+#: Points whose residuals and Jacobian the coupled solve evaluates at
+#: once (the whole Jacobian of 250k points x 12 observations is 360 MB in
+#: float64, and its temporaries several times that).
+LM_ROWS = 16384
 #: Points whose table search runs at once: its temporaries are
 #: [n, V, R, 3] in the fit's precision, 0.8 GB each for 41k points x 25
 #: views x 32 roughness cells at once.
@@ -996,6 +1051,83 @@ def _row_chunks(num: int, size: int):
             for start in range(0, max(num, 1), size)]
 
 
+def _one_lighting_captures(data: Data, lightings):
+    """Per lighting: its views (V_l,) and the capture of those views
+    alone, with its map as ``envmap`` (the photographs left out: the
+    observations are projected already)."""
+    from tg_intrinsic.transforms.select_views import keep_views
+    envmaps, view_lighting = lightings
+    base = data.clone()
+    for key in ('images', 'envmaps', 'view_lighting'):
+        if key in base:
+            del base[key]
+    captures = []
+    for lighting in view_lighting.unique().tolist():
+        views = (view_lighting == lighting).nonzero().flatten()
+        part = keep_views(base, views)
+        part.envmap = envmaps[lighting]
+        captures.append((views, part))
+    return captures
+
+
+def _lowest_entropy_start(data: Data, parts) -> Data:
+    """``data`` with what the spherical-harmonic steps compute per point
+    taken from the lighting of lowest entropy at each point, and the
+    mirror directions of every view from its own lighting's part."""
+    joint = data.clone()
+    first = parts[0][1]
+    num = data.num_nodes
+    entropy = torch.stack([part.entropy for _, part in parts])   # (L, N)
+    choice = entropy.argmin(0)
+    points = torch.arange(num, device=choice.device)
+    for key in first.keys():
+        if key in data or key in ('view_index', 'envmap'):
+            continue
+        if key == 'mirror_dir':
+            mirror = first.mirror_dir.new_zeros(
+                (num, data.obs_mask.size(1), 3))
+            for views, part in parts:
+                mirror[:, views.to(mirror.device)] = part.mirror_dir
+            joint.mirror_dir = mirror
+        elif torch.is_tensor(first[key]) and first[key].dim() > 0 \
+                and first[key].size(0) == num:
+            joint[key] = torch.stack([part[key] for _, part in parts])[
+                choice, points]
+        else:  # the settings of the fits (prefilter, regulariser)
+            joint[key] = first[key]
+    return joint
+
+
+def _lit_tables(data: Data, envmap: Optional[Tensor], lightings,
+                grid: Tensor, visible: Optional[Tensor], light_samples: int,
+                brdf_samples: int, seed: int):
+    """:func:`reflection_tables` of the observations in their slots, in
+    single precision (Monte Carlo estimates of about 1% noise: float32
+    halves their cost), under ``envmap``, or under each view's own map of
+    ``lightings`` ``(envmaps, view_lighting)``: then the irradiance is per
+    slot, (N, K, 3), each from its view's map."""
+    single = torch.float32
+    normal, view = data.normal.to(single), data.obs_dir.to(single)
+    mask = data.obs_mask.bool()
+    if lightings is None:
+        return reflection_tables(normal, view, mask, envmap.to(single), grid,
+                                 visible, light_samples, brdf_samples, seed)
+    envmaps, view_lighting = lightings
+    slot_lighting = view_lighting.to(data.obs_view.device)[data.obs_view]
+    irradiance = normal.new_zeros(mask.shape + (3, ))
+    tables = None
+    for lighting in slot_lighting[mask].unique().tolist():
+        lit = mask & (slot_lighting == lighting)
+        point_irradiance, lit_tables = reflection_tables(
+            normal, view, lit, envmaps[lighting].to(single), grid, visible,
+            light_samples, brdf_samples, seed)
+        irradiance = torch.where(lit.unsqueeze(-1),
+                                 point_irradiance.unsqueeze(1), irradiance)
+        # zero off the mask: the lightings' tables add up
+        tables = lit_tables if tables is None else tables.add_(lit_tables)
+    return irradiance, tables
+
+
 class _IntegralProblem(_Problem):
     """The fitting problem of :meth:`FrequencySVBRDF.refine`: the full
     integral, tabulated over a roughness grid and interpolated linearly
@@ -1004,7 +1136,9 @@ class _IntegralProblem(_Problem):
                  irradiance: Tensor, tables: Tensor):
         super().__init__(model, data, tv_weight, tv_k)
         self.grid, self.tables = grid, tables
-        self.diffuse = irradiance / math.pi
+        # (N, 1, 3) under one lighting, (N, K, 3) under one per view
+        self.diffuse = (irradiance if irradiance.dim() == 3
+                        else irradiance.unsqueeze(1)) / math.pi
 
     def refresh(self):
         pass
@@ -1025,7 +1159,7 @@ class _IntegralProblem(_Problem):
         constant = tables[:, :, :, 1]
         target = self.target[rows].unsqueeze(2)   # [n, V, 1, 3]
         weight = self.weight[rows].unsqueeze(2)   # [n, V, 1, 1]
-        diffuse = self.diffuse[rows].unsqueeze(1).unsqueeze(1)  # [n,1,1,3]
+        diffuse = self.diffuse[rows].unsqueeze(2)   # [n, 1 or V, 1, 3]
         best_loss = best = None
         for metallic in (0.0, 1.0):
             # prediction = colour * slope + offset, linear in the colour
@@ -1065,7 +1199,7 @@ class _IntegralProblem(_Problem):
         upper = self.tables[rows, :, cell + 1].to(dtype)
         table = lower + (upper - lower) * frac.unsqueeze(-1)
         specular, constant = table[:, :, 0], table[:, :, 1]
-        diffuse = self.diffuse[rows].unsqueeze(1)      # [n, 1, 3]
+        diffuse = self.diffuse[rows]                   # [n, 1 or V, 3]
         r0 = 0.04 * (1 - m) + b * m
         pred = ((b * (1 - m)).unsqueeze(1) * diffuse
                 + r0.unsqueeze(1) * specular + constant)

@@ -239,7 +239,8 @@ def levenberg_marquardt_tv(jacobian: Callable[[Tensor], tuple], x0: Tensor,
                            l1_epsilon: float = 1e-3,
                            tv_epsilon: float = 1e-2,
                            max_step: Optional[float] = None,
-                           cg_iter: int = 50) -> tuple:
+                           cg_iter: int = 50,
+                           rows_per_call: Optional[int] = None) -> tuple:
     r"""Minimises the L1 fit of many small problems coupled by a total
     variation over a graph,
 
@@ -283,6 +284,12 @@ def levenberg_marquardt_tv(jacobian: Callable[[Tensor], tuple], x0: Tensor,
             (default: :obj:`None`)
         cg_iter (int, optional): Conjugate-gradient iterations per step.
             (default: :obj:`50`)
+        rows_per_call (int, optional): Evaluate the residuals and their
+            Jacobian this many rows at a time, ``jacobian(x[rows], rows)``
+            with ``rows`` a long tensor of row indices, so that the whole
+            :math:`(N, R, P)` Jacobian is never held (the same numbers:
+            each row's terms are its own). :obj:`None`: all rows in one
+            call, ``jacobian(x)``. (default: :obj:`None`)
 
     Returns:
         ``(x, info)``: the parameters :math:`(N, P)` and an
@@ -309,24 +316,40 @@ def levenberg_marquardt_tv(jacobian: Callable[[Tensor], tuple], x0: Tensor,
     upper = _bound(upper, 'upper', x, float('inf'))
     if bool(((x < lower) | (x > upper)).any()):
         raise ValueError("'x0' lies outside the bounds; clamp it first")
+    if rows_per_call is not None:
+        rows_per_call = check_positive_int(rows_per_call, 'rows_per_call')
     i, j = edges
 
+    def normal_equations(r, jac, row_weight):
+        """The data term's blocks J^T W J and gradient J^T W r of some
+        rows, W reweighted for the L1 norm at their residuals."""
+        w = row_weight / r.abs().clamp_min(l1_epsilon)
+        jw = jac * w.unsqueeze(-1)
+        return jw.transpose(1, 2) @ jac, (jw * r.unsqueeze(-1)).sum(1)
+
     def evaluate(x):
-        r, jac = jacobian(x)
-        r, jac = r.detach(), jac.detach()
+        """Residuals, the data term's blocks and gradient, and E at x."""
+        if rows_per_call is None:
+            r, jac = (t.detach() for t in jacobian(x))
+            parts = [(r, *normal_equations(r, jac, weight))]
+        else:
+            parts = []
+            for start in range(0, num, rows_per_call):
+                rows = torch.arange(start, min(start + rows_per_call, num),
+                                    device=x.device)
+                r, jac = (t.detach() for t in jacobian(x[rows], rows))
+                parts.append((r, *normal_equations(r, jac, weight[rows])))
+                del jac
+        r, blocks, gradient = (torch.cat(column) for column in zip(*parts))
         data = (weight * r.abs()).sum()
         variation = edge_weight * (x[i] - x[j]).abs().sum()
-        return r, jac, float(data + variation)
+        return r, blocks, gradient, float(data + variation)
 
-    r, jac, cost = evaluate(x)
+    r, blocks, gradient, cost = evaluate(x)
     if not (torch.isfinite(r).all() and math.isfinite(cost)):
         raise ValueError("the residuals are NaN or infinite at 'x0'")
     info = LMInfo(objective=[cost / num])
     for _ in range(max_iter):
-        w = weight / r.abs().clamp_min(l1_epsilon)
-        jw = jac * w.unsqueeze(-1)
-        blocks = jw.transpose(1, 2) @ jac                  # (N, P, P)
-        gradient = (jw * r.unsqueeze(-1)).sum(1)          # (N, P)
         diff = x[i] - x[j]
         we = edge_weight / diff.abs().clamp_min(tv_epsilon)   # (E, P)
         pull = we * diff
@@ -350,10 +373,12 @@ def levenberg_marquardt_tv(jacobian: Callable[[Tensor], tuple], x0: Tensor,
                 longest = step.abs().amax(1, keepdim=True)
                 step = step * (max_step / longest.clamp_min(max_step))
             trial = torch.minimum(torch.maximum(x + step, lower), upper)
-            r_trial, jac_trial, new_cost = evaluate(trial)
+            evaluated = evaluate(trial)
+            new_cost = evaluated[-1]
             if math.isfinite(new_cost) and new_cost < cost:
                 gain = (cost - new_cost) / max(cost, 1e-300)
-                x, r, jac, cost = trial, r_trial, jac_trial, new_cost
+                x = trial
+                r, blocks, gradient, cost = evaluated
                 lam /= 3
                 break
             lam *= 4

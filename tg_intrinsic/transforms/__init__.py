@@ -28,7 +28,7 @@ from .gravo_hierarchy import GravoHierarchy
 from .project_views import ProjectViews
 from .fit_spherical_harmonics import FitSphericalHarmonics
 from .spectral_uncertainty import SpectralUncertainty
-from .select_views import SelectViews, keep_views
+from .select_views import SelectViews, join_lightings, keep_views
 from .clean_mesh import CleanMesh
 from .decimate import Decimate
 from .farthest_point_resample import FarthestPointResample
@@ -38,7 +38,8 @@ from .pooling_levels import PoolingLevels
 __all__ = ['EstimateNormals', 'TangentFrames', 'MLSOperators',
            'RandomRotation', 'RandomAxisScale', 'RandomTranslation',
            'NormalizeArea', 'LogMap', 'ParallelTransport',
-           'MultiscaleSupports', 'HarmonicPrecompute', 'GravoHierarchy', 'ProjectViews',
-           'FitSphericalHarmonics', 'SpectralUncertainty', 'SelectViews',
-           'keep_views', 'CleanMesh', 'Decimate', 'FarthestPointResample',
-           'TextureTexels', 'PoolingLevels']
+           'MultiscaleSupports', 'HarmonicPrecompute', 'GravoHierarchy',
+           'ProjectViews', 'FitSphericalHarmonics', 'SpectralUncertainty',
+           'SelectViews', 'keep_views', 'join_lightings', 'CleanMesh',
+           'Decimate', 'FarthestPointResample', 'TextureTexels',
+           'PoolingLevels']

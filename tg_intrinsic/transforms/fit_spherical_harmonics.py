@@ -8,7 +8,9 @@ from tg_intrinsic.geometry import tangent_frames
 from tg_intrinsic.geometry.appearance.brdf import reflect, to_local
 from tg_intrinsic.geometry.appearance.envmap import (check_envmap,
                                                      equirect_lookup,
-                                                     filter_envmap, irradiance)
+                                                     filter_envmap, irradiance,
+                                                     view_lightings)
+from tg_intrinsic.geometry.appearance.observations import observed_slots
 from tg_intrinsic.geometry.appearance.sh import (fit_light, fit_sh,
                                                  light_directions,
                                                  num_coefficients)
@@ -57,7 +59,9 @@ class FitSphericalHarmonics(GraphTransform):
     surface: samples at :obj:`num_light_samples` Fibonacci directions of the
     local frame, zero below the horizon, fitted over the whole sphere so
     the lobe convolution sees no made-up light from below),
-    ``light_radiance`` (those samples, for the shadowing refit),
+    ``light_radiance`` (those samples, for the shadowing refit of
+    :meth:`~tg_intrinsic.nn.FrequencySVBRDF.fit`; :math:`12 S` bytes per
+    point, 3 GB for 250k points, so it can be left out),
     ``sh_out`` (the observations as a function of their mirror direction
     :math:`r = 2(n \cdot \omega_o)n - \omega_o`), ``sh_in_obs`` (the light
     sampled at the same mirror directions with the same weights, so that
@@ -74,6 +78,10 @@ class FitSphericalHarmonics(GraphTransform):
         prefilter_alpha (float, optional): :math:`\alpha'`; by default
             :math:`\max(V^{-1/2}, 1/l^*)`; 0 switches the band limit off.
             (default: :obj:`None`)
+        store_light_radiance (bool, optional): Keep ``light_radiance``
+            (needed by :meth:`~tg_intrinsic.nn.FrequencySVBRDF.fit` with
+            the shadowing of eq. 5.11, not by the refinement).
+            (default: :obj:`True`)
 
     Shapes:
         - **input:** ``normal`` :math:`(N, 3)`, ``envmap`` :math:`(H, W, 3)`,
@@ -88,7 +96,8 @@ class FitSphericalHarmonics(GraphTransform):
     """
     def __init__(self, l_max: int = 5, regularizer: float = 1e-4,
                  num_light_samples: int = 1024,
-                 prefilter_alpha: float = None):
+                 prefilter_alpha: float = None,
+                 store_light_radiance: bool = True):
         self.l_max = check_positive_int(l_max, 'l_max')
         self.regularizer = check_positive_float(regularizer, 'regularizer')
         self.num_light_samples = check_positive_int(num_light_samples,
@@ -103,6 +112,7 @@ class FitSphericalHarmonics(GraphTransform):
                                                    'prefilter_alpha',
                                                    allow_zero=True)
         self.prefilter_alpha = prefilter_alpha
+        self.store_light_radiance = bool(store_light_radiance)
 
     def forward(self, data: Data) -> Data:
         pos = check_points(data.pos, 'pos')
@@ -112,6 +122,12 @@ class FitSphericalHarmonics(GraphTransform):
                              "estimate it with EstimateNormals")
         normal = check_vectors(normal, 'normal', pos.size(0), pos)
         normal = normal / normal.norm(dim=-1, keepdim=True).clamp_min(1e-30)
+        if view_lightings(data) is not None:
+            raise ValueError(
+                "the views of this capture are lit by several maps "
+                "('data.envmaps'); the harmonics model one lighting: fit "
+                "each lighting's views on their own (keep_views, with its "
+                "map as 'data.envmap'), as FrequencySVBRDF.recover does")
         envmap = getattr(data, 'envmap', None)
         if envmap is None:
             raise ValueError("FitSphericalHarmonics needs the lighting as "
@@ -141,9 +157,12 @@ class FitSphericalHarmonics(GraphTransform):
 
         local = light_directions(self.num_light_samples, pos.dtype,
                                  pos.device)
+        # each point's fit over the views that see it (the others weigh
+        # 0): a third of the work where a point is seen by a third of them
+        slots, filled = observed_slots(mask)
         parts = [self._fit_points(light, local, normal[rows], frame[rows],
-                                  view[rows], radiance[rows],
-                                  mask[rows].bool())
+                                  view[rows], radiance[rows], slots[rows],
+                                  filled[rows])
                  for rows in _chunks(num, POINTS_PER_CHUNK)]
         sh_in, light_radiance, mirror_local, sh_out, sh_in_obs = (
             torch.cat(column) for column in zip(*parts))
@@ -153,7 +172,10 @@ class FitSphericalHarmonics(GraphTransform):
         data.sh_in = sh_in
         data.sh_out = sh_out
         data.sh_in_obs = sh_in_obs
-        data.light_radiance = light_radiance
+        if self.store_light_radiance:
+            data.light_radiance = light_radiance
+        else:
+            data.light_radiance = None
         data.mirror_dir = mirror_local
         data.irradiance = irradiance(envmap, normal)
         data.sh_prefilter = torch.tensor([prefilter], dtype=pos.dtype,
@@ -163,11 +185,12 @@ class FitSphericalHarmonics(GraphTransform):
         return data
 
     def _fit_points(self, light, local, normal, frame, view, radiance,
-                    mask):
+                    slots, filled):
         """The fits of some points (each point's are its own): light
         coefficients, the light at the samples (float32), the mirror
-        directions, and the outgoing and incoming coefficients at the
-        observations."""
+        directions of every view, and the outgoing and incoming
+        coefficients at the observations, which sit in ``slots`` (N, K)
+        where ``filled``."""
         # Incoming light at Fibonacci directions of every local frame, read
         # above the horizon only (the fit gives the others weight 0).
         upper = local[:, 2] > 0
@@ -181,14 +204,21 @@ class FitSphericalHarmonics(GraphTransform):
         # Outgoing radiance as a function of the mirror direction.
         mirror = reflect(view, normal.unsqueeze(1))
         mirror_local = to_local(mirror, frame)
-        weights = mirror_local[..., 2].clamp_min(0) * mask
-        values = torch.where(mask.unsqueeze(-1), radiance.to(normal.dtype),
-                             torch.zeros_like(radiance, dtype=normal.dtype))
+
+        def observed(t):
+            return t.gather(1, slots.unsqueeze(-1).expand(-1, -1,
+                                                          t.size(-1)))
+        seen_local = observed(mirror_local)
+        weights = seen_local[..., 2].clamp_min(0) * filled
+        values = torch.where(filled.unsqueeze(-1),
+                             observed(radiance).to(normal.dtype),
+                             torch.zeros_like(seen_local))
         # one factorisation for both: same directions, same weights
-        both = fit_sh(mirror_local, torch.cat(
-            [values, equirect_lookup(light, mirror)], -1), self.l_max,
-            weights, self.regularizer)
-        return (sh_in, light_radiance.float(), mirror_local, both[..., :3],
+        both = fit_sh(seen_local, torch.cat(
+            [values, equirect_lookup(light, observed(mirror))], -1),
+            self.l_max, weights, self.regularizer)
+        return (sh_in, light_radiance.float() if self.store_light_radiance
+                else light_radiance.new_zeros(0), mirror_local, both[..., :3],
                 both[..., 3:])
 
     def __repr__(self) -> str:

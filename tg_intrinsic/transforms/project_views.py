@@ -71,7 +71,8 @@ class ProjectViews(GraphTransform):
           :math:`(V, 3, 3)`, ``extrinsics`` :math:`(V, 3, 4)`
         - **output:** ``obs_radiance`` :math:`(N, V, 3)` (0 where masked),
           ``obs_dir`` :math:`(N, V, 3)` (unit, point to camera),
-          ``obs_mask`` :math:`(N, V)` (bool)
+          ``obs_mask`` :math:`(N, V)` (bool), ``obs_left_out`` (the
+          number of observations masked out for touching NaN pixels)
     """
     def __init__(self, depth_tolerance: float = 0.02, min_cos: float = 0.0,
                  splat_radius: int = None):
@@ -151,6 +152,9 @@ class ProjectViews(GraphTransform):
         data.obs_radiance = radiance
         data.obs_dir = direction
         data.obs_mask = mask
+        # seen, but on pixels that carry no radiance (NaN: outside a mask,
+        # clipped, outside after undistortion)
+        data.obs_left_out = torch.tensor([lost], device=pos.device)
         return data
 
     @staticmethod

@@ -20,7 +20,8 @@ from .fit_spherical_harmonics import FitSphericalHarmonics
 
 #: Attributes with one entry per view on their first axis; the observations
 #: (``obs_*``) have it second.
-PER_VIEW = ('intrinsics', 'extrinsics', 'images', 'view_index')
+PER_VIEW = ('intrinsics', 'extrinsics', 'images', 'view_index',
+            'view_lighting')
 OBSERVATIONS = ('obs_radiance', 'obs_dir', 'obs_mask')
 #: Attributes computed from the observations, stale once views are dropped.
 DERIVED = ('sh_out', 'sh_in_obs', 'mirror_dir', 'entropy', 'likelihood')
@@ -76,6 +77,63 @@ def keep_views(data: Data, views) -> Data:
                 raise ValueError(f"'data.{key}' has {value.size(0)} views, "
                                  f"obs_mask {total}")
             out[key] = value[index.to(value.device)]
+    return out
+
+
+def join_lightings(captures: Sequence[Data]) -> Data:
+    r"""One capture of an object photographed under several lightings:
+    the views of every capture (of the same surface), each under its own
+    capture's ``envmap``. The observations (``obs_*``, second axis) and
+    the cameras (and ``images`` tensors, first axis) are concatenated,
+    and the maps become ``envmaps`` :math:`(L, H, W, 3)` with
+    ``view_lighting`` :math:`(V)`, the map of each view, which
+    :meth:`~tg_intrinsic.nn.FrequencySVBRDF.recover` and
+    :meth:`~tg_intrinsic.nn.FrequencySVBRDF.refine` use.
+
+    Args:
+        captures (sequence of Data): Captures of one surface (the same
+            ``pos``), each with its ``envmap`` (all of one size) and its
+            observations or photographs, none prepared further
+            (``FitSphericalHarmonics`` models one lighting).
+    """
+    captures = list(captures)
+    if not captures:
+        raise ValueError("'captures' must hold at least one capture")
+    first = captures[0]
+    for index, capture in enumerate(captures):
+        where = f"capture {index}"
+        if getattr(capture, 'envmap', None) is None \
+                or getattr(capture, 'view_lighting', None) is not None:
+            raise ValueError(f"{where} must have one lighting, "
+                             f"'data.envmap' [H, W, 3]")
+        if capture.envmap.shape != first.envmap.shape:
+            raise ValueError(f"{where}'s envmap is {list(capture.envmap.shape)}"
+                             f" but the first's {list(first.envmap.shape)}; "
+                             f"resample the maps to one size")
+        if not torch.equal(capture.pos, first.pos):
+            raise ValueError(f"{where} has another surface than the first "
+                             f"('pos' differs); join captures of one object")
+        stale = [k for k in DERIVED if getattr(capture, k, None) is not None]
+        if stale:
+            raise ValueError(f"{where} already holds {stale}, computed "
+                             f"under one lighting; join the captures before "
+                             f"FitSphericalHarmonics")
+        if not torch.is_tensor(getattr(capture, 'images', torch.empty(0))):
+            raise ValueError(f"{where}'s photographs are read from disk; "
+                             f"project them first (ProjectViews)")
+    out = first.clone()
+    del out.envmap
+    for key in OBSERVATIONS:
+        if getattr(first, key, None) is not None:
+            out[key] = torch.cat([c[key] for c in captures], 1)
+    for key in PER_VIEW:
+        if getattr(first, key, None) is not None:
+            out[key] = torch.cat([c[key] for c in captures], 0)
+    out.envmaps = torch.stack([c.envmap for c in captures])
+    views = [c.intrinsics.size(0) for c in captures]
+    out.view_lighting = torch.repeat_interleave(
+        torch.arange(len(captures)), torch.tensor(views)).to(
+            first.intrinsics.device)
     return out
 
 

@@ -75,6 +75,21 @@ def test_sampling_and_splatting():
     assert math.isinf(float(depth[0, 0, 3]))
 
 
+def test_compiled_splatting_is_the_vectorised_one():
+    """The CPU's compiled splat gives the torch loop's buffer exactly."""
+    from tg_intrinsic.geometry.appearance.cameras import _splat_depth_torch
+    g = torch.Generator().manual_seed(0)
+    uv = torch.rand(3, 400, 2, generator=g, dtype=D64) * torch.tensor(
+        [40.0, 30.0], dtype=D64) - 2
+    depth = 1 + torch.rand(3, 400, generator=g, dtype=D64)
+    valid = torch.rand(3, 400, generator=g) > 0.2
+    radius = torch.randint(0, 4, (3, 400), generator=g)
+    compiled = splat_depth(uv, depth, valid, radius, 28, 36)
+    plain = _splat_depth_torch(uv, depth, valid, radius, 28, 36)
+    assert torch.equal(compiled, plain)
+    assert torch.isfinite(compiled).float().mean() > 0.5
+
+
 @pytest.mark.parametrize('K, E, match', [
     (torch.eye(3)[None], torch.eye(3, 4)[None].repeat(2, 1, 1), 'views'),
     (torch.tensor([[[1.0, 0, 0], [1, 1, 0], [0, 0, 1]]]),

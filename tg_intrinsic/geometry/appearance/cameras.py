@@ -11,10 +11,13 @@ row :math:`i`, column :math:`j` covers :math:`u \in [j, j + 1)`,
 import math
 from typing import Tuple
 
+import numpy as np
 import torch
+from numba import prange
 from torch import Tensor
 
 from ..checks import check_image_size, check_points
+from ..jit import jit
 
 __all__ = ['camera_centers', 'project', 'splat_depth', 'sample_images',
            'look_at_cameras']
@@ -43,8 +46,23 @@ def splat_depth(uv: Tensor, depth: Tensor, valid: Tensor, radius: Tensor,
     r"""A depth buffer :math:`(V, H, W)` made by splatting every valid point
     as a square of :obj:`radius` pixels :math:`(V, N)` (integers) around its
     pixel, keeping the nearest depth; empty pixels are :math:`+\infty`.
-    Vectorised over views and points (one ``scatter_reduce`` per stencil
-    offset), so it runs on any device."""
+    On the CPU a compiled loop over each point's own square; elsewhere
+    vectorised over views and points (one ``scatter_reduce`` per stencil
+    offset). Both give the same buffer (a minimum is exact)."""
+    num_views = uv.size(0)
+    if uv.device.type == 'cpu':
+        buffer = np.full((num_views, height, width), np.inf)
+        _splat_kernel(uv.detach().double().contiguous().numpy(),
+                      depth.detach().double().contiguous().numpy(),
+                      valid.contiguous().numpy(),
+                      radius.long().contiguous().numpy(), buffer)
+        return torch.from_numpy(buffer).to(depth.dtype)
+    return _splat_depth_torch(uv, depth, valid, radius, height, width)
+
+
+def _splat_depth_torch(uv: Tensor, depth: Tensor, valid: Tensor,
+                       radius: Tensor, height: int, width: int) -> Tensor:
+    """:func:`splat_depth` on any device."""
     num_views = uv.size(0)
     buffer = torch.full((num_views, height * width), math.inf,
                         dtype=depth.dtype, device=depth.device)
@@ -60,6 +78,25 @@ def splat_depth(uv: Tensor, depth: Tensor, valid: Tensor, radius: Tensor,
             index = (view * (height * width) + r * width + c)[keep]
             buffer.view(-1).scatter_reduce_(0, index, depth[keep], 'amin')
     return buffer.view(num_views, height, width)
+
+
+@jit(parallel=True)
+def _splat_kernel(uv, depth, valid, radius, buffer):  # pragma: no cover
+    """:func:`splat_depth` on the CPU: every view in parallel, each valid
+    point's square of its radius."""
+    num_views, height, width = buffer.shape
+    for v in prange(num_views):
+        for p in range(uv.shape[1]):
+            if not valid[v, p]:
+                continue
+            col, row = math.floor(uv[v, p, 0]), math.floor(uv[v, p, 1])
+            reach, z = radius[v, p], depth[v, p]
+            for r in range(max(row - reach, 0), min(row + reach + 1,
+                                                     height)):
+                for c in range(max(col - reach, 0), min(col + reach + 1,
+                                                         width)):
+                    if z < buffer[v, r, c]:
+                        buffer[v, r, c] = z
 
 
 def sample_images(images: Tensor, uv: Tensor):

@@ -94,7 +94,11 @@ def direction_visibility(points: Tensor, normal: Tensor, vertices: Tensor,
     # distant pinhole cameras looking back along each direction; their
     # image just holds the object
     distance = 1e2 * size
-    pixels = 64
+    # the rays' candidate triangles come from a screen grid of about two
+    # cells per triangle, at most four per pixel: enough pixels that a big
+    # mesh gets its whole grid (a ray tests a handful of triangles, not
+    # dozens)
+    pixels = max(64, math.ceil(math.sqrt(faces.size(1) / 2) / 2))
     intrinsics, extrinsics = look_at_cameras(
         centre + distance * directions, centre.tolist(),
         2 * math.degrees(math.atan(0.6 * size / distance)), (pixels, pixels))
@@ -203,10 +207,21 @@ def _uniforms(count: int, samples: int, dimension: int, seed: int, salt: int,
     quasi-Monte Carlo; independent coordinates matter: a pixel and the
     position inside it must not be drawn from correlated numbers). Drawn
     on the CPU, so the numbers do not depend on the device."""
+    return torch.cat([block for _, block in _uniform_blocks(
+        count, samples, dimension, seed, salt, dtype, device, max(count, 1))])
+
+
+def _uniform_blocks(count: int, samples: int, dimension: int, seed: int,
+                    salt: int, dtype, device, block: int):
+    """:func:`_uniforms` drawn ``block`` rows at a time (the same numbers):
+    ``(first row, (rows, samples, dimension))`` pairs, so that millions of
+    pairs never hold all their samples at once."""
     engine = torch.quasirandom.SobolEngine(dimension, scramble=True,
                                            seed=seed * 7919 + salt)
-    return engine.draw(count * samples, dtype=torch.float64).view(
-        count, samples, dimension).to(device, dtype)
+    for start in range(0, max(count, 1), block):
+        rows = min(block, count - start)
+        yield start, engine.draw(rows * samples, dtype=torch.float64).view(
+            rows, samples, dimension).to(device, dtype)
 
 
 def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
@@ -312,8 +327,10 @@ def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
     light_local = torch.einsum('nij,nsj->nsi', frames, light_dir)
 
     point, view = mask.nonzero(as_tuple=True)
-    uniforms = _uniforms(point.numel(), brdf_samples, 2, seed, 2, dtype,
-                         device)
+    # the pairs' samples, drawn a block at a time (all at once, millions of
+    # pairs would hold gigabytes)
+    blocks = _uniform_blocks(point.numel(), brdf_samples, 2, seed, 2, dtype,
+                             device, PAIRS_PER_BLOCK)
     if compiled:
         # one compiled pass, nothing per sample stored; sums in float64,
         # stored at the inputs' precision
@@ -323,61 +340,77 @@ def reflection_tables(normal: Tensor, view_dirs: Tensor, mask: Tensor,
                           dtype=np.float32 if dtype == torch.float32
                           else np.float64)
         no_grid = np.zeros((0, 0), dtype=np.uint8)
-        _tables_kernel(
-            numpy(frames), numpy(view_dirs), point.cpu().numpy(),
-            view.cpu().numpy(),
-            numpy(alpha.flatten()), numpy(uniforms), numpy(light_local),
-            numpy(light), numpy(light_density), numpy(envmap),
-            numpy(environment.pixel_density), no_grid if visibility is None
-            else _uint8(visibility), grid_rows if visibility is not None
-            else 0, tables)
+        inputs = (numpy(frames), numpy(view_dirs))
+        shared = (numpy(alpha.flatten()), )
+        lights = (numpy(light_local), numpy(light), numpy(light_density),
+                  numpy(envmap), numpy(environment.pixel_density),
+                  no_grid if visibility is None else _uint8(visibility),
+                  grid_rows if visibility is not None else 0)
+        point, view = point.cpu().numpy(), view.cpu().numpy()
+        for start, uniforms in blocks:
+            pairs = slice(start, start + uniforms.size(0))
+            _tables_kernel(*inputs, point[pairs], view[pairs], *shared,
+                           numpy(uniforms), *lights, tables)
         return irradiance, torch.from_numpy(tables).to(device, dtype)
     tables = torch.zeros(num, views, roughness.numel(), 2, 3, dtype=dtype,
                          device=device)
-    brdf_u1, brdf_u2 = uniforms.unbind(-1)
-    for start in range(0, point.numel(), chunk):
-        p, v = point[start:start + chunk], view[start:start + chunk]
-        out = torch.einsum('cij,cj->ci', frames[p], view_dirs[p, v].to(dtype))
-        out = torch.nn.functional.normalize(out, dim=-1)
-        cos_o = out[:, 2].clamp_min(1e-6)
-        out = out.view(-1, 1, 1, 3)
-        g1_out = smith_g1(cos_o.view(-1, 1, 1), alpha)
-        b1 = brdf_u1[start:start + chunk].unsqueeze(1)
-        b2 = brdf_u2[start:start + chunk].unsqueeze(1)
-
-        def accumulate(incoming, half, radiance, env_density):
-            # balance heuristic: every sample of either strategy is
-            # weighted by the sum of both sample densities
-            cos_i = incoming[..., 2]
-            ggx = _ggx(half[..., 2].clamp_min(0), alpha)
-            brdf_density = g1_out * ggx / (4 * cos_o.view(-1, 1, 1))
-            integrand = brdf_density * smith_g1(cos_i, alpha)
-            weight = torch.where(
-                cos_i > 0, integrand / (brdf_samples * brdf_density
-                                        + light_samples * env_density
-                                        ).clamp_min(1e-300),
-                torch.zeros_like(integrand))
-            schlick = (1 - (out * half).sum(-1).clamp(0, 1)) ** 5
-            a = (weight * (1 - schlick)).unsqueeze(-1) * radiance
-            c = (weight * schlick).unsqueeze(-1) * radiance
-            return torch.stack([a.sum(2), c.sum(2)], 2)
-
-        # visible-normal samples
-        half = _visible_normals(out, alpha, b1, b2)
-        incoming = 2 * (out * half).sum(-1, keepdim=True) * half - out
-        world = torch.einsum('cij,cgsi->cgsj', frames[p], incoming)
-        row, col = environment.coordinates(world)
-        radiance = equirect_lookup(envmap, world) \
-            * visible(p, row, col).unsqueeze(-1)
-        result = accumulate(incoming, half, radiance,
-                            environment.density(row, col))
-        # environment samples
-        incoming = light_local[p].unsqueeze(1)
-        half = torch.nn.functional.normalize(incoming + out, dim=-1)
-        tables[p, v] = result + accumulate(incoming, half,
-                                           light[p].unsqueeze(1),
-                                           light_density[p].unsqueeze(1))
+    for block_start, uniforms in blocks:
+        for start in range(block_start, block_start + uniforms.size(0),
+                           chunk):
+            end = min(start + chunk, block_start + uniforms.size(0))
+            tables[point[start:end], view[start:end]] = _torch_tables(
+                point[start:end], view[start:end],
+                uniforms[start - block_start:end - block_start], frames,
+                view_dirs, alpha, envmap, environment, visible, light_local,
+                light, light_density, brdf_samples, light_samples)
     return irradiance, tables
+
+
+def _torch_tables(p, v, uniforms, frames, view_dirs, alpha, envmap,
+                  environment, visible, light_local, light, light_density,
+                  brdf_samples, light_samples):
+    """The tables of the pairs ``(p, v)`` by the torch backend of
+    :func:`reflection_tables`, their visible-normal samples
+    ``uniforms``."""
+    dtype = frames.dtype
+    out = torch.einsum('cij,cj->ci', frames[p], view_dirs[p, v].to(dtype))
+    out = torch.nn.functional.normalize(out, dim=-1)
+    cos_o = out[:, 2].clamp_min(1e-6)
+    out = out.view(-1, 1, 1, 3)
+    g1_out = smith_g1(cos_o.view(-1, 1, 1), alpha)
+    b1, b2 = (u.unsqueeze(1) for u in uniforms.unbind(-1))
+
+    def accumulate(incoming, half, radiance, env_density):
+        # balance heuristic: every sample of either strategy is
+        # weighted by the sum of both sample densities
+        cos_i = incoming[..., 2]
+        ggx = _ggx(half[..., 2].clamp_min(0), alpha)
+        brdf_density = g1_out * ggx / (4 * cos_o.view(-1, 1, 1))
+        integrand = brdf_density * smith_g1(cos_i, alpha)
+        weight = torch.where(
+            cos_i > 0, integrand / (brdf_samples * brdf_density
+                                    + light_samples * env_density
+                                    ).clamp_min(1e-300),
+            torch.zeros_like(integrand))
+        schlick = (1 - (out * half).sum(-1).clamp(0, 1)) ** 5
+        a = (weight * (1 - schlick)).unsqueeze(-1) * radiance
+        c = (weight * schlick).unsqueeze(-1) * radiance
+        return torch.stack([a.sum(2), c.sum(2)], 2)
+
+    # visible-normal samples
+    half = _visible_normals(out, alpha, b1, b2)
+    incoming = 2 * (out * half).sum(-1, keepdim=True) * half - out
+    world = torch.einsum('cij,cgsi->cgsj', frames[p], incoming)
+    row, col = environment.coordinates(world)
+    radiance = equirect_lookup(envmap, world) \
+        * visible(p, row, col).unsqueeze(-1)
+    result = accumulate(incoming, half, radiance,
+                        environment.density(row, col))
+    # environment samples
+    incoming = light_local[p].unsqueeze(1)
+    half = torch.nn.functional.normalize(incoming + out, dim=-1)
+    return result + accumulate(incoming, half, light[p].unsqueeze(1),
+                               light_density[p].unsqueeze(1))
 
 
 def _visibility_cell(row, col, grid_rows: int, height: int, width: int):
@@ -392,6 +425,8 @@ def _uint8(visibility: Tensor) -> np.ndarray:
     return visibility.detach().cpu().to(torch.uint8).contiguous().numpy()
 
 
+#: Pairs whose samples are drawn at once (about 64 MB in float64).
+PAIRS_PER_BLOCK = 2 ** 17
 #: Most environment pixels the compiled irradiance sums over per point;
 #: a larger map is summed in blocks of 2 x 2 (its radiance times solid
 #: angle added up, at the block's centre) until it fits: the cosine moves

@@ -13,6 +13,7 @@ the middle column looks along :math:`+x`. The direction of
 azimuth.
 """
 import math
+from typing import Optional, Tuple
 
 import numpy as np
 import torch
@@ -44,6 +45,42 @@ def check_envmap(envmap, name: str = 'envmap') -> Tensor:
         raise ValueError(f"'{name}' has negative radiance; an environment map "
                          f"must be non-negative")
     return envmap
+
+
+def view_lightings(data) -> Optional[Tuple[Tensor, Tensor]]:
+    r"""The lighting of every photograph of a capture lit differently from
+    view to view: ``data.envmaps`` :math:`(L, H, W, 3)` (each one as
+    :func:`check_envmap` wants it) and ``data.view_lighting``
+    :math:`(V)`, the map of each view (integers in :math:`[0, L)`). Returns
+    them, or :obj:`None` for a capture with one lighting
+    (``data.envmap``) alone."""
+    envmaps = getattr(data, 'envmaps', None)
+    which = getattr(data, 'view_lighting', None)
+    if envmaps is None and which is None:
+        return None
+    if envmaps is None or which is None:
+        raise ValueError("a capture lit differently per view needs both "
+                         "'data.envmaps' [L, H, W, 3] and "
+                         "'data.view_lighting' [V] (the map of each view)")
+    envmaps = check_tensor(envmaps, 'envmaps')
+    if envmaps.dim() != 4:
+        raise ValueError(f"'envmaps' must be [L, H, W, 3], got "
+                         f"{list(envmaps.shape)}")
+    for lighting in envmaps:
+        check_envmap(lighting, 'envmaps')
+    which = check_tensor(which, 'view_lighting')
+    views = getattr(data, 'intrinsics', None)
+    if which.dim() != 1 or which.is_floating_point() or (
+            views is not None and which.numel() != views.size(0)):
+        raise ValueError(f"'view_lighting' must hold one integer per view"
+                         f"{'' if views is None else f' ({views.size(0)})'},"
+                         f" got {which.dtype} {list(which.shape)}")
+    if which.numel() and (int(which.min()) < 0
+                          or int(which.max()) >= envmaps.size(0)):
+        raise ValueError(f"'view_lighting' must index the {envmaps.size(0)} "
+                         f"maps of 'envmaps', got values from "
+                         f"{int(which.min())} to {int(which.max())}")
+    return envmaps, which.long()
 
 
 def equirect_angles(height: int, width: int, dtype=torch.float64,

@@ -24,6 +24,10 @@ context: the mean and the best of the single-light results, and the oracle
 merge that picks per point the lighting with the lowest true roughness
 error (ground truth; the ceiling of any per-point selection).
 
+Also one recovery of every capture's photographs together, each under its
+own map (``join_lightings``, then ``recover``: per-photograph lighting,
+issue 42), against the merges.
+
 Goals: the uncertainty merge beats averaging the maps in both metrics
 (issue 32); issue 17's goal for a merge: beat the mean of the single-light
 results and stay within 10% of the best single light, both metrics.
@@ -51,6 +55,7 @@ from tg_intrinsic.datasets import svbrdf_scene  # noqa: E402
 from tg_intrinsic.geometry.appearance.envmap import \
     sun_sky_envmap  # noqa: E402
 from tg_intrinsic.nn import FrequencySVBRDF, SVBRDFResult  # noqa: E402
+from tg_intrinsic.transforms import join_lightings  # noqa: E402
 from tg_intrinsic.utils import atomic_write, atomic_write_json  # noqa: E402
 from tg_intrinsic.utils import machine_info  # noqa: E402
 
@@ -105,13 +110,14 @@ def errors(base_color, metallic, roughness, truth, seen):
 
 
 def run_seed(seed, envmaps, views):
-    results, rows, rough_errors = [], [], []
+    results, rows, rough_errors, captures = [], [], [], []
     seen_any = None
     for name, envmap in envmaps.items():
         data = svbrdf_scene('sphere', num_views=views, materials='mixed',
                             roughness_range=(0.2, 0.8), resolution=3,
                             render_images=False, dtype=torch.float64,
                             envmap=envmap, seed=seed)
+        captures.append(data)
         start = time.perf_counter()
         result, prepared = FrequencySVBRDF(data.num_nodes).recover(
             data, progress=False)
@@ -159,6 +165,13 @@ def run_seed(seed, envmaps, views):
             'oracle_per_point': tuple(stacked(n)[best_source, points]
                                       for n in MAPS)}.items():
         merges[key] = errors(base, metallic, roughness, truth, seen)[1]
+    # one recovery from every photograph under its own lighting
+    start = time.perf_counter()
+    joint = FrequencySVBRDF(truth.num_nodes).recover(
+        join_lightings(captures), progress=False)[0]
+    merges['joint'] = errors(joint.base_color, joint.metallic,
+                             joint.roughness, truth, seen)[1]
+    merges['joint']['seconds'] = time.perf_counter() - start
     merges['uncertainty']['weight_per_envmap'] = {
         name: float(weight[k, seen].mean()) for k, name in enumerate(envmaps)}
     merges['entropy']['share_per_envmap'] = {
@@ -193,6 +206,9 @@ def run_seed(seed, envmaps, views):
     return {
         'seed': seed, 'rows': rows, 'merges': merges, 'single': single,
         'goals': goals,
+        'joint_beats_uncertainty_merge': {
+            key: merges['joint'][key] < merges['uncertainty'][key]
+            for key in METRICS + ('metallic_mae', )},
         'uncertainty_beats_average': all(
             g['beats_average_of_maps']
             for g in goals['uncertainty'].values()),
@@ -208,7 +224,8 @@ def run_seed(seed, envmaps, views):
 def plot(runs, path):
     fig, axes = plt.subplots(1, len(METRICS) + 1,
                              figsize=(5 * (len(METRICS) + 1), 4))
-    merges = ('uncertainty', 'entropy', 'average_of_maps', 'oracle_per_point')
+    merges = ('uncertainty', 'entropy', 'average_of_maps', 'oracle_per_point',
+              'joint')
     for ax, key, title in zip(axes, METRICS, ('roughness MAE',
                                               'base colour RMSE')):
         for run_index, run in enumerate(runs):
@@ -218,14 +235,15 @@ def plot(runs, path):
                    label='single light' if run_index == 0 else None)
             ax.bar(x + len(values) + np.arange(len(merges)),
                    [run['merges'][m][key] for m in merges],
-                   color=['C0', 'C3', 'C1', 'C2'])
+                   color=['C0', 'C3', 'C1', 'C2', 'C4'])
             ax.hlines(run['single'][key]['mean'], x - 0.5,
                       x + len(values) + len(merges) - 0.5, color='k', lw=0.8,
                       label='mean of single lights' if run_index == 0
                       else None)
         ax.set_title(f'{title} per seed: lights (grey), uncertainty merge '
                      f'(blue),\nentropy merge (red), average of maps '
-                     f'(orange), oracle (green)', fontsize=8)
+                     f'(orange), oracle (green), one recovery of every '
+                     f'view under its own map (purple)', fontsize=8)
         ax.set_xticks([])
         ax.legend(fontsize=7)
     ax = axes[-1]
@@ -273,7 +291,10 @@ def main():
             r['uncertainty_beats_average'] for r in runs),
         'issue17_goal_met_in': {merge: sum(
             r['issue17_goal_met'][merge] for r in runs)
-            for merge in ('uncertainty', 'entropy')}})
+            for merge in ('uncertainty', 'entropy')},
+        'joint_beats_uncertainty_merge_in': {key: sum(
+            r['joint_beats_uncertainty_merge'][key] for r in runs)
+            for key in METRICS + ('metallic_mae', )}})
     plot(runs, os.path.join(args.out, 'svbrdf_merge.png'))
 
 

@@ -37,6 +37,10 @@ def test_every_format_reads_as_the_native_folder(capture, native, tmp_path,
     data = read_capture(written['capture'], dtype=torch.float64)
     same_capture(data, native)
     assert data.capture_info['format'] == READ_AS.get(form, form)
+    # the photographs stay on disk, and the capture pickles (torch.save)
+    import pickle
+    again = pickle.loads(pickle.dumps(data))
+    assert torch.equal(again.images[-1], data.images[-1])
 
 @pytest.mark.parametrize('form', ['colmap', 'nerfstudio', 'orb'])
 def test_ldr_photographs_within_the_quantisation(capture, native, tmp_path,

@@ -236,15 +236,13 @@ def _photographs(spec: CaptureSpec, exposure, gamma):
             f"environment map's radiance (for example the ratio of a white "
             f"card's value in a photograph to the light the map gives it)")
     relative = _relative_exposures(spec, ldr)
-
-    def read(v: int):
-        return _read_view(spec.views[v], gamma, ldr[v],
-                          None if not ldr[v] else exposure * relative[v])
-
+    read = _ViewReader(spec.views, gamma, [
+        None if not is_ldr else exposure * scale
+        for is_ldr, scale in zip(ldr, relative or [1.0] * len(ldr))])
     size, lit = None, False
     counts = {'masked': 0, 'clipped': 0, 'outside_after_undistortion': 0}
     for v, view in enumerate(spec.views):
-        image, left_out = read(v)
+        image, left_out = read.with_counts(v)
         if size is None:
             size = tuple(image.shape[:2])
         _check_size(view, image, size, spec)
@@ -254,7 +252,7 @@ def _photographs(spec: CaptureSpec, exposure, gamma):
     if not lit:
         raise ValueError(f"no photograph of {spec.source} has a pixel above "
                          f"0 where it counts (inside the masks, unclipped)")
-    images = PhotographStack(lambda v: read(v)[0], len(spec.views), size,
+    images = PhotographStack(read, len(spec.views), size,
                              [view.image for view in spec.views])
     info = {'views': len(spec.views), 'ldr': bool(any(ldr)),
             'exposure': exposure, 'gamma': gamma,
@@ -262,6 +260,20 @@ def _photographs(spec: CaptureSpec, exposure, gamma):
             [round(float(r), 6) for r in relative],
             'pixels_left_out': counts}
     return images, info
+
+
+class _ViewReader:
+    """Reads view ``v`` of a capture as radiance (a plain object, so that
+    a capture read with its photographs on disk can be pickled)."""
+    def __init__(self, views: List[CaptureView], gamma, scales):
+        self.views, self.gamma, self.scales = views, gamma, scales
+
+    def with_counts(self, v: int):
+        return _read_view(self.views[v], self.gamma,
+                          self.scales[v] is not None, self.scales[v])
+
+    def __call__(self, v: int):
+        return self.with_counts(v)[0]
 
 
 def _read_view(view: CaptureView, gamma, ldr: bool, scale):

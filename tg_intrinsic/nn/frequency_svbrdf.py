@@ -500,6 +500,14 @@ class FrequencySVBRDF(torch.nn.Module):
         - without it, :meth:`fit` (Levenberg-Marquardt unless
           :obj:`solver` says otherwise): the paper's recovery.
 
+        A capture whose photographs are lit by different maps
+        (``data.envmaps`` with ``data.view_lighting``, e.g. from
+        :func:`~tg_intrinsic.transforms.join_lightings` or a
+        ``transforms.json`` with ``hdri_path``) gets its harmonics and
+        spectra per lighting, each point starts from the lighting of lowest
+        entropy, and the refinement (required) takes every view under its
+        own map.
+
         Args:
             data (Data): A capture as :func:`~tg_intrinsic.io.read_scene`
                 or :func:`~tg_intrinsic.datasets.svbrdf_scene` returns it

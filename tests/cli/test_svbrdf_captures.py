@@ -145,3 +145,41 @@ def test_photographs_are_streamed_not_held(capsys, tmp_path, monkeypatch):
     assert sorted(reads) == list(range(6))
     for name, value in whole.items():
         np.testing.assert_array_equal(streamed[name], value, err_msg=name)
+
+
+def test_photographs_under_their_own_maps(capsys, tmp_path):
+    """transforms.json frames naming their own maps (hdri_path): here two
+    files of the same sky, so the recovery under each photograph's own map
+    must land where the recovery under the one map does."""
+    import shutil
+    capture = example(capsys, tmp_path / 'capture', '--format',
+                      'nerfstudio')
+    refined = ['--refine', '2', '--quiet']
+
+    def recover_refined(out):
+        code, _, err = run_cli(capsys, 'svbrdf', *capture, '--out', out,
+                               *refined)
+        assert code == 0, err
+        return (dict(np.load(os.path.join(out, 'maps.npz'))),
+                json.loads(open(os.path.join(out, 'report.json')).read()))
+    one, report = recover_refined(tmp_path / 'one')
+    assert report['lightings'] == 1
+    folder = capture[0]
+    path = os.path.join(folder, 'transforms.json')
+    spec = json.loads(open(path).read())
+    sky = [name for name in os.listdir(folder) if name.startswith('envmap')]
+    shutil.copy(os.path.join(folder, sky[0]),
+                os.path.join(folder, 'second' + sky[0]))
+    for index, frame in enumerate(spec['frames']):
+        frame['hdri_path'] = ('second' if index % 2 else '') + sky[0]
+    open(path, 'w').write(json.dumps(spec))
+    own, report = recover_refined(tmp_path / 'own')
+    assert report['lightings'] == 2
+    assert len(report['capture']['lightings']) == 2
+    assert report['pipeline']['refine'] is not None
+    assert np.abs(own['roughness'] - one['roughness']).mean() < 0.05
+    # the harmonic fit alone cannot model several lightings: said in words
+    code, _, err = run_cli(capsys, 'svbrdf', *capture, '--out',
+                           tmp_path / 'fit', '--refine', '0')
+    assert code == 2 and 'only the refinement models' in err
+    assert not os.path.exists(tmp_path / 'fit')

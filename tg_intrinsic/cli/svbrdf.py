@@ -430,7 +430,8 @@ def recover(args) -> int:
         if os.path.lexists(truth_path) else None
     inputs = [scene, truth_path, capture['folder']] + (
         scene_files(capture['folder']) if capture['format'] == 'native'
-        else [capture['geometry'], capture['envmap']])
+        else [capture['geometry'], capture['envmap']]
+        + capture.get('lightings', []))
     seconds['read'] = round(time.perf_counter() - start, 3)
     if args.texture is not None:
         _check_texture_inputs(data)

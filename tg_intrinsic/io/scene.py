@@ -545,11 +545,18 @@ def _write_exr(path: str, image: np.ndarray):
 
 def scene_summary(data: Data) -> str:
     """One line describing a scene read by :func:`read_scene`: points (and
-    triangles), views and image size, environment-map size."""
+    triangles), views and image size, the environment map's size (or the
+    maps' count and size)."""
     views, height, width = data.images.shape[:3]
     face = getattr(data, 'face', None)
     surface = f"{data.pos.size(0)} points" + (
         f", {face.size(1)} triangles" if face is not None else
         ' (point cloud)')
-    return (f"{surface}; {views} view(s) of {height} x {width}; "
-            f"environment map {data.envmap.size(0)} x {data.envmap.size(1)}")
+    maps = getattr(data, 'envmaps', None)
+    if maps is not None:  # each view under its own map (join_lightings)
+        lighting = (f"{maps.size(0)} environment maps of {maps.size(1)} x "
+                    f"{maps.size(2)}")
+    else:
+        lighting = (f"environment map {data.envmap.size(0)} x "
+                    f"{data.envmap.size(1)}")
+    return f"{surface}; {views} view(s) of {height} x {width}; {lighting}"

@@ -40,7 +40,7 @@ extras_require = {
         'xatlas>=0.0.9',
         'pygltflib>=1.16',
         # a reader of COLMAP models that is not ours (tests/io/test_colmap.py)
-        'pycolmap>=3.10; python_version >= "3.10"',
+        'pycolmap>=3.10',
         # the wheel as users get it (tests/test_packaging.py; built without
         # isolation, so with this environment's setuptools)
         'build>=1.0',
@@ -78,7 +78,8 @@ setup(
                  'curved surfaces with intrinsic geometry'),
     long_description=open('README.md', encoding='utf-8').read(),
     long_description_content_type='text/markdown',
-    python_requires='>=3.9',
+    # torch 2.13.0, pinned, declares Requires-Python >=3.10
+    python_requires='>=3.10',
     packages=find_packages(include=['tg_intrinsic', 'tg_intrinsic.*']),
     install_requires=install_requires,
     extras_require=extras_require,

@@ -97,3 +97,19 @@ def test_the_wheel_works_outside_the_repository(dist, tmp_path):
     run([command, 'demo', '--quick', '--out', str(outside / 'demo')],
         cwd=outside, env=env)
     assert (outside / 'demo' / 'summary.json').is_file()
+
+
+def test_the_python_versions_follow_the_pinned_torch():
+    """setup.py's python_requires is the Requires-Python of the torch the
+    Makefile pins (a lower one promised 3.9, where installing torch 2.13
+    fails), read from the installed torch's metadata."""
+    import importlib.metadata
+    import re
+    torch_requires = importlib.metadata.metadata('torch')['Requires-Python']
+    setup = open(os.path.join(ROOT, 'setup.py')).read()
+    ours = re.search(r"python_requires='([^']+)'", setup).group(1)
+    assert ours == torch_requires, (ours, torch_requires)
+    makefile = open(os.path.join(ROOT, 'Makefile')).read()
+    pinned = re.search(r"torch==([0-9.]+)", makefile)
+    assert pinned and importlib.metadata.version('torch').startswith(
+        pinned.group(1))

@@ -1,14 +1,24 @@
 # Everything runs inside .venv so a fresh machine needs only python3.
 # TORCH_INSTALL installs PyTorch before the package; the default is the CPU
-# build this project is tested with. For a GPU, pass the pip command for the
-# CUDA build that matches your driver (see README).
+# build this project is tested with, from PyTorch's index of CPU builds (on
+# Linux the default index's torch==2.13.0 is the CUDA build, several GB).
+# Where that index cannot be reached within 5 s (a machine whose only package
+# source is a mirror), the default index is used, with a note. For a GPU,
+# pass the pip command for the CUDA build that matches your driver (README).
 PYTHON ?= python3
 VENV ?= .venv
-TORCH_INSTALL ?= pip install torch==2.13.0
+TORCH_VERSION := 2.13.0
+TORCH_CPU_INDEX ?= https://download.pytorch.org/whl/cpu
+TORCH_INSTALL ?= if python -c "import sys, urllib.request; \
+	urllib.request.urlopen(sys.argv[1].rstrip('/') + '/torch/', timeout=5)" \
+	"$(TORCH_CPU_INDEX)" 2>/dev/null; then \
+	pip install --timeout 15 --index-url "$(TORCH_CPU_INDEX)" torch==$(TORCH_VERSION); \
+	else echo "note: $(TORCH_CPU_INDEX) cannot be reached; installing torch==$(TORCH_VERSION) from pip's default index (on Linux that may be the CUDA build)"; \
+	pip install torch==$(TORCH_VERSION); fi
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test docs train benchmarks clean gravomg-env
+.PHONY: install install-torch demo test docs train benchmarks clean gravomg-env
 
 $(STAMP): setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -18,6 +28,10 @@ $(STAMP): setup.py
 	touch $(STAMP)
 
 install: $(STAMP)
+
+# PyTorch alone, into an existing .venv (as the first install does).
+install-torch:
+	. $(BIN)/activate && $(TORCH_INSTALL)
 
 demo: $(STAMP)
 	$(BIN)/tg-intrinsic demo

@@ -113,3 +113,69 @@ def test_the_python_versions_follow_the_pinned_torch():
     pinned = re.search(r"torch==([0-9.]+)", makefile)
     assert pinned and importlib.metadata.version('torch').startswith(
         pinned.group(1))
+
+
+def install_torch(index: str) -> str:
+    """``make install-torch`` into this test's own environment (where torch
+    2.13.0 is installed, so pip finds it satisfied and downloads nothing)
+    with ``index`` as PyTorch's CPU index; the commands and their output."""
+    activate = os.path.join(sys.prefix, 'bin', 'activate')
+    if sys.prefix == sys.base_prefix or not os.path.isfile(activate):
+        pytest.skip('the tests run outside a virtual environment')
+    result = run(['make', '-s', '-C', ROOT, 'install-torch', f'VENV={sys.prefix}',
+                  f'TORCH_CPU_INDEX={index}'])
+    return result.stdout + result.stderr
+
+
+def test_torch_comes_from_the_cpu_index_where_it_answers(tmp_path):
+    import functools
+    import http.server
+    import threading
+    (tmp_path / 'torch').mkdir()
+    (tmp_path / 'torch' / 'index.html').write_text('<html></html>')
+    handler = functools.partial(http.server.SimpleHTTPRequestHandler,
+                                directory=str(tmp_path))
+    handler.log_message = lambda *args: None
+    server = http.server.ThreadingHTTPServer(('127.0.0.1', 0), handler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        index = f'http://127.0.0.1:{server.server_address[1]}'
+        output = install_torch(index)
+    finally:
+        server.shutdown()
+    assert 'cannot be reached' not in output
+    assert f'Looking in indexes: {index},' in output
+
+
+def test_an_unreachable_cpu_index_falls_back_with_a_note():
+    import socket
+    with socket.socket() as probe:  # a port nothing listens on
+        probe.bind(('127.0.0.1', 0))
+        port = probe.getsockname()[1]
+    output = install_torch(f'http://127.0.0.1:{port}')
+    assert (f'note: http://127.0.0.1:{port} cannot be reached; installing '
+            f'torch==2.13.0 from pip\'s default index') in output
+    assert f'Looking in indexes: http://127.0.0.1:{port}' not in output
+    assert 'Requirement already satisfied: torch==2.13.0' in output
+
+
+def test_the_readme_names_what_make_install_installs():
+    """README's install section lists the pinned torch's own requirements
+    and every requirement (runtime and test extra) of setup.py."""
+    import importlib.metadata
+    import re
+    readme = open(os.path.join(ROOT, 'README.md'), encoding='utf-8').read()
+    section = readme[readme.index('<!-- section: install -->'):
+                     readme.index('<!-- end: install -->')]
+    section = ' '.join(section.split()).lower()
+    setup = open(os.path.join(ROOT, 'setup.py')).read()
+    named = re.findall(r"'([A-Za-z][\w.-]*)(?:\[\w+\])?(?:[<>=!]=?[^']*)?'",
+                       setup[setup.index('install_requires = ['):
+                             setup.index("'docs':")])
+    torch_own = [r.split(';')[0] for r in importlib.metadata.requires('torch')
+                 if 'extra ==' not in r]
+    for requirement in named + torch_own:
+        name = re.split(r'[<>=!; ]', requirement)[0].lower()
+        if name in ('test', 'torch'):
+            continue
+        assert name in section, f'README does not say that {name} is installed'

@@ -1,4 +1,5 @@
 import re
+import runpy
 
 from setuptools import find_packages, setup
 
@@ -23,53 +24,11 @@ install_requires = [
     'fast-simplification>=0.2',  # Decimate (preserve_border from 0.2)
 ]
 
+# the extras and what needs each are listed once, in tg_intrinsic/extras.py
+# (run, not imported: importing the package needs torch)
 extras_require = {
-    'test': [
-        'pytest>=7',
-        'hypothesis>=6.80',
-        'robust-laplacian>=0.2.7',
-        'potpourri3d>=1.0',
-        # independent oracles of the HDR readers (tests/io)
-        'opencv-python-headless>=4.8',
-        'OpenEXR>=3.2',
-        # ScanObjectNN's HDF5 files (tests/datasets)
-        'h5py>=3.8',
-        # SphereDigits' 8x8 digits (bundled in the wheel, no download)
-        'scikit-learn>=1.2',
-        # svbrdf --texture: a UV atlas, and a glTF reader that is not ours
-        'xatlas>=0.0.9',
-        'pygltflib>=1.16',
-        # a reader of COLMAP models that is not ours (tests/io/test_colmap.py)
-        'pycolmap>=3.10',
-        # the wheel as users get it (tests/test_packaging.py; built without
-        # isolation, so with this environment's setuptools)
-        'build>=1.0',
-        'setuptools>=70.1',
-        'twine>=5.0',
-        # docstrings of constants (tests/test_docs.py)
-        'sphinx>=7.0',
-    ],
-    # The documentation site: make docs.
-    'docs': ['sphinx>=7.0', 'furo>=2024.1', 'myst-parser>=3.0',
-             'sphinx-gallery>=0.17'],
-    # log_map(method='vector_heat'): geometry-central's vector heat method.
-    'heat': ['potpourri3d>=1.0'],
-    # Optional compiled scatter kernels; results must not change with it.
-    'scatter': ['torch-scatter'],
-    # read_exr; Radiance .hdr needs nothing extra.
-    'exr': ['OpenEXR>=3.2'],
-    # ScanObjectNN's HDF5 files.
-    'h5': ['h5py>=3.8'],
-    # The direct-solver peer (CHOLMOD) of benchmarks/gravo_applications.py.
-    'benchmarks': ['cholespy>=2.0'],
-    # The external renderer of the SVBRDF oracle test and benchmark
-    # (its llvm variant also needs: apt-get install libllvm19).
-    'mitsuba': ['mitsuba>=3.5'],
-    # SphereDigits: scikit-learn's bundled 8x8 digits.
-    'digits': ['scikit-learn>=1.2'],
-    # UV atlases for meshes without UVs (svbrdf --texture, uv_atlas).
-    'textures': ['xatlas>=0.0.9'],
-}
+    name: requirements for name, (requirements, _) in
+    runpy.run_path('tg_intrinsic/extras.py')['EXTRAS'].items()}
 
 setup(
     name='tg_intrinsic',

@@ -1,12 +1,12 @@
 """tg-intrinsic info: the versions, the device and the optional extras,
 as a table and as JSON."""
-import importlib
+import importlib.metadata
 import json
-import types
 
 import pytest
 
 from tg_intrinsic.cli import info
+from tg_intrinsic.extras import EXTRAS
 
 from tests.cli import run_cli
 
@@ -15,26 +15,21 @@ def test_info(capsys):
     code, out, _ = run_cli(capsys, 'info')
     assert code == 0
     for name in ('torch', 'torch_geometric', 'tg_intrinsic', 'device',
-                 'potpourri3d', 'OpenEXR', 'mitsuba', 'torch_scatter'):
+                 *EXTRAS):
         assert name in out
     code, out, _ = run_cli(capsys, 'info', '--json')
-    info = json.loads(out)
-    assert code == 0 and set(info['extras']) == {
-        'potpourri3d', 'OpenEXR', 'mitsuba', 'torch_scatter'}
+    report = json.loads(out)
+    assert code == 0 and set(report['extras']) == set(EXTRAS)
 
 
-def fake_importlib(modules):
-    """``importlib`` whose import_module returns ``modules[name]``, or
-    raises it when it is an exception."""
-    real = importlib.import_module
-
-    def import_module(name):
-        if name not in modules:
-            return real(name)
-        if isinstance(modules[name], BaseException):
-            raise modules[name]
-        return modules[name]
-    return types.SimpleNamespace(import_module=import_module)
+def test_every_extra_of_the_installed_package_is_listed():
+    """The extras info lists are those pip knows of this package (from
+    its installed metadata, which setup.py wrote from the same list)."""
+    provided = importlib.metadata.metadata('tg_intrinsic').get_all(
+        'Provides-Extra')
+    assert set(provided) == set(EXTRAS)
+    assert {'textures', 'h5', 'digits', 'docs', 'heat', 'exr', 'mitsuba',
+            'scatter', 'benchmarks', 'test'} <= set(EXTRAS)
 
 
 def test_the_versions_are_the_installed_ones():
@@ -52,39 +47,37 @@ def test_the_versions_are_the_installed_ones():
     assert report['cuda_version'] == torch.version.cuda
     assert report['device'] == ('cuda' if torch.cuda.is_available()
                                 else 'cpu')
-    for name, adds, how in info.EXTRAS:
+    for name, (requirements, needed_by) in EXTRAS.items():
         extra = report['extras'][name]
-        assert (extra['adds'], extra['install']) == (adds, how)
-        try:
-            module = importlib.import_module(name)
-        except Exception:  # noqa: BLE001 - absent or broken
-            assert extra['version'] is None
-        else:
-            assert extra['version'] == str(getattr(module, '__version__',
-                                                   'installed'))
+        assert extra['needed_by'] == needed_by
+        assert extra['install'] == f'pip install "tg_intrinsic[{name}]"'
+        for requirement in requirements:
+            distribution = info._distribution(requirement)
+            try:
+                version = importlib.metadata.version(distribution)
+            except importlib.metadata.PackageNotFoundError:
+                version = None
+            assert extra['installed'][distribution] == version
 
 
-def test_missing_broken_and_installed_extras(capsys, monkeypatch):
-    monkeypatch.setattr(info, 'importlib', fake_importlib({
-        'potpourri3d': ImportError('No module named potpourri3d'),
-        'OpenEXR': RuntimeError('broken build'),  # broken counts as missing
-        'mitsuba': types.SimpleNamespace(__version__='3.9.1'),
-        'torch_scatter': types.SimpleNamespace(),  # no __version__
-    }))
-    report = info.collect()
-    assert [report['extras'][n]['version'] for n, _, _ in info.EXTRAS] == \
-        [None, None, '3.9.1', 'installed']
+def test_missing_and_installed_extras(capsys, monkeypatch):
+    versions = {'potpourri3d': None, 'OpenEXR': '3.9.1', 'furo': None,
+                'sphinx': '8.0', 'myst-parser': '4.0',
+                'sphinx-gallery': '0.19'}
+    real = info._installed
+    monkeypatch.setattr(info, '_installed', lambda name: versions[name]
+                        if name in versions else real(name))
     code, out, _ = run_cli(capsys, 'info')
     assert code == 0
     lines = out.splitlines()
-    start = lines.index('optional extras:')
+    start = lines.index('optional extras (pip install "tg_intrinsic[NAME]"):')
     extras = {line.split()[0]: line for line in lines[start + 1:]}
-    assert set(extras) == {name for name, _, _ in info.EXTRAS}
-    assert "missing (pip install tg_intrinsic[heat]): log maps with " \
-        "method='vector_heat'" in extras['potpourri3d']
-    assert 'missing (pip install tg_intrinsic[exr])' in extras['OpenEXR']
-    assert ' 3.9.1: the external renderer' in extras['mitsuba']
-    assert ' installed: compiled scatter kernels' in extras['torch_scatter']
+    assert list(extras) == list(EXTRAS)
+    assert "missing potpourri3d: log maps with method='vector_heat'" in \
+        extras['heat']
+    assert 'installed (OpenEXR 3.9.1): reading and writing .exr' in \
+        extras['exr']
+    assert 'missing furo: the documentation site' in extras['docs']
 
 
 def test_the_table_is_aligned_and_says_when_there_is_no_gpu(capsys,
@@ -93,7 +86,7 @@ def test_the_table_is_aligned_and_says_when_there_is_no_gpu(capsys,
     monkeypatch.setattr(torch.cuda, 'is_available', lambda: False)
     code, out, _ = run_cli(capsys, 'info')
     assert code == 0
-    table = out.split('optional extras:')[0].splitlines()
+    table = out.split('optional extras')[0].splitlines()
     names = [line.split('  ')[0].rstrip() for line in table]
     assert names[:4] == ['tg_intrinsic', 'python', 'torch', 'torch_geometric']
     assert names[-1] == 'device'

@@ -1,26 +1,17 @@
 """Prints the versions of the library and its dependencies, the compute
 device, and which optional extras are installed."""
 import importlib
+import importlib.metadata
 import json
+import re
+
+from tg_intrinsic.extras import EXTRAS
 
 HELP = 'versions, device and optional extras'
 EXAMPLE = """example:
   tg-intrinsic info          # a table
   tg-intrinsic info --json   # the same as JSON, for bug reports
 """
-
-# (import name, what it adds, how to get it)
-EXTRAS = (
-    ('potpourri3d', "log maps with method='vector_heat'", 'pip install '
-     'tg_intrinsic[heat]'),
-    ('OpenEXR', 'reading .exr images and environment maps',
-     'pip install tg_intrinsic[exr]'),
-    ('mitsuba', 'the external renderer of the SVBRDF oracle and benchmark',
-     'pip install tg_intrinsic[mitsuba]'),
-    ('torch_scatter', 'compiled scatter kernels (results do not change)',
-     'pip install tg_intrinsic[scatter]'),
-)
-
 
 def add_arguments(parser):
     parser.add_argument('--json', action='store_true',
@@ -46,10 +37,26 @@ def collect() -> dict:
         info[name] = _version(name)
     info['device'] = 'cuda' if torch.cuda.is_available() else 'cpu'
     info['cuda_version'] = torch.version.cuda
-    info['extras'] = {name: {'version': _version(name), 'adds': adds,
-                             'install': how}
-                      for name, adds, how in EXTRAS}
+    info['extras'] = {
+        name: {'installed': {_distribution(r): _installed(_distribution(r))
+                             for r in requirements},
+               'needed_by': needed_by,
+               'install': f'pip install "tg_intrinsic[{name}]"'}
+        for name, (requirements, needed_by) in EXTRAS.items()}
     return info
+
+
+def _distribution(requirement: str) -> str:
+    """The distribution a requirement names ('h5py>=3.8' -> 'h5py')."""
+    return re.split(r'[<>=!~;\[ ]', requirement, maxsplit=1)[0]
+
+
+def _installed(distribution: str):
+    """The installed version of ``distribution``, or None."""
+    try:
+        return importlib.metadata.version(distribution)
+    except importlib.metadata.PackageNotFoundError:
+        return None
 
 
 def run(args):
@@ -71,8 +78,16 @@ def run(args):
     width = max(len(name) for name, _ in rows)
     for name, value in rows:
         print(f"{name:<{width}}  {value}")
-    print('optional extras:')
+    print('optional extras (pip install "tg_intrinsic[NAME]"):')
+    width = max(map(len, info['extras']))
     for name, extra in info['extras'].items():
-        state = extra['version'] or f"missing ({extra['install']})"
-        print(f"  {name:<14} {state}: {extra['adds']}")
+        missing = [d for d, v in extra['installed'].items() if v is None]
+        if missing:
+            state = f"missing {', '.join(missing)}"
+        elif len(extra['installed']) == 1:
+            state = 'installed ({} {})'.format(*next(iter(
+                extra['installed'].items())))
+        else:
+            state = 'installed'
+        print(f"  {name:<{width}}  {state}: {extra['needed_by']}")
     return 0

@@ -7,7 +7,6 @@ the maths lives in the library. A user mistake (a missing file, a bad
 value) ends with one line on stderr and exit code 2; ``--debug`` shows the
 traceback instead.
 """
-import argparse
 import importlib
 import signal
 import sys
@@ -15,7 +14,8 @@ import threading
 import warnings
 from typing import List, Optional
 
-from .common import ArgumentParser, common_options, one_line, user_message
+from .common import (ArgumentParser, HelpFormatter, common_options, one_line,
+                     user_message)
 
 COMMANDS = ('demo', 'train', 'precompute', 'solve', 'svbrdf', 'info')
 
@@ -53,7 +53,7 @@ def _stop_signals():
 def build_parser() -> ArgumentParser:
     shared = common_options()
     parser = ArgumentParser(
-        prog='tg-intrinsic', parents=[shared],
+        prog='tg-intrinsic', parents=[shared], formatter_class=HelpFormatter,
         description='Learning and computing on curved surfaces: DeltaConv, '
         'Harmonic Surface Networks, Gravo MG and frequency-domain SVBRDF '
         'recovery.',
@@ -70,7 +70,7 @@ def build_parser() -> ArgumentParser:
             name, parents=[shared], help=module.HELP,
             description=module.__doc__.strip().split('\n\n')[0],
             epilog=module.EXAMPLE,
-            formatter_class=argparse.RawDescriptionHelpFormatter)
+            formatter_class=HelpFormatter)
         module.add_arguments(command)
         command.set_defaults(run=module.run)
     return parser

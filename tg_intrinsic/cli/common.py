@@ -6,6 +6,7 @@ import argparse
 import inspect
 import math
 import sys
+import textwrap
 import time
 from contextlib import contextmanager
 from typing import Iterable, Optional
@@ -23,6 +24,18 @@ class ArgumentParser(argparse.ArgumentParser):
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} "
                      f"--help)\n")
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """argparse's help with words kept whole: option help breaks lines only
+    at spaces (argparse's own breaks hyphenated words and long file names,
+    so a name copied from ``--help`` would be wrong); descriptions and
+    examples keep their own lines."""
+
+    def _split_lines(self, text, width):
+        text = ' '.join(text.split())
+        return textwrap.wrap(text, width, break_on_hyphens=False,
+                             break_long_words=False)
 
 
 def user_message(error: BaseException) -> str:

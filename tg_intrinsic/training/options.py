@@ -2,6 +2,7 @@
 read, and the entry point."""
 import argparse
 import os
+from typing import Dict, List, Optional
 
 from tg_intrinsic import distributed
 from tg_intrinsic.devices import PRECISIONS, check_device
@@ -13,6 +14,38 @@ from tg_intrinsic.training.loop import lone_shape_batches, train
 from tg_intrinsic.training.sources import (DATASETS, DEFAULT_DATASET, MODELS,
                                            ROTATIONS, SUPPORTED, TASKS,
                                            resolve_protocol)
+
+
+def protocol_defaults(field: str, model: Optional[str] = None) -> str:
+    """What an option left out takes from ``--protocol``: its value in each
+    protocol (those of ``model`` only, for a model's own options), equal
+    values grouped, as ``train --help`` prints it."""
+    def shown(value):
+        if value is None or value == ():
+            return 'none'
+        if isinstance(value, bool):
+            return 'on' if value else 'off'
+        if isinstance(value, tuple):
+            return ' '.join(shown(v) for v in value)
+        return f'{value:g}' if isinstance(value, float) else str(value)
+    groups: Dict[str, List[str]] = {}
+    for name, protocol in PROTOCOLS.items():
+        if model is None or protocol.model == model:
+            groups.setdefault(shown(getattr(protocol, field)), []).append(name)
+    if len(groups) == 1:
+        return f'default from --protocol: {next(iter(groups))} in every one'
+    return 'default from --protocol: ' + ', '.join(
+        f"{value} ({', '.join(names)})" for value, names in groups.items())
+
+
+def _protocol_option(add):
+    """``add`` for an option whose default is the protocol's: its help ends
+    with the value of every protocol (:func:`protocol_defaults`)."""
+    def add_protocol_option(flag, help, model=None, **kwargs):
+        field = flag.lstrip('-').replace('-', '_')
+        add(flag, default=None,
+            help=f'{help}; {protocol_defaults(field, model)}', **kwargs)
+    return add_protocol_option
 
 
 def add_arguments(parser, model_and_dataset: bool = True):
@@ -43,9 +76,10 @@ def _data_options(add):
         help='the paper protocol whose values fill every option left out '
         '(default: deltanet-modelnet40, deltanet-shapenet-part, hsn-shrec11 '
         'or hsn-human-seg by model and task)')
-    add('--task', default=None, choices=TASKS,
-        help='protocol; segmentation: per-point (DeltaNet) or per-vertex '
-        '(HSN) labels')
+    protocol = _protocol_option(add)
+    protocol('--task', choices=TASKS,
+             help='classification (one label per shape) or segmentation '
+             '(per-point labels for DeltaNet, per-vertex for HSN)')
     add('--root', default='data',
         help='cache folder of the synthetic data sets and prepared inputs')
     add('--out', default=None,
@@ -59,95 +93,117 @@ def _data_options(add):
         'the run continues')
     add('--force-reload', action='store_true',
         help='re-read the files of a folder data set')
-    add('--num-points', type=int, default=None,
-        help='protocol; DeltaNet: points sampled per shape')
+    protocol('--num-points', type=int, model='deltanet',
+             help='DeltaNet: points sampled per shape')
     add('--shapes-per-class', type=int, default=None,
         help='shrink the synthetic sets (quick runs)')
-    add('--train-per-class', type=int, default=None,
-        help='protocol; train on this many shapes of every class, drawn '
-        'with --data-seed (classification)')
+    protocol('--train-per-class', type=int,
+             help='train on this many shapes of every class, drawn with '
+             '--data-seed (classification; none: all of them)')
 
 
 def _optimisation_options(add):
     """Options: epochs, batches, the optimiser and its schedule."""
-    add('--epochs', type=int, default=None, help='protocol')
-    add('--batch-size', type=int, default=None,
-        help='protocol; the global batch: under torchrun each of the N '
-        'processes takes 1/N of it (a multiple of N)')
-    add('--optimizer', default=None, choices=['adam', 'sgd'],
-        help='protocol; sgd uses momentum 0.9')
-    add('--lr', type=float, default=None, help='protocol')
-    add('--schedule', default=None, choices=['cosine', 'step'],
-        help='protocol; cosine to --lr-min, or step: times --gamma at '
-        'every --milestones epoch')
-    add('--lr-min', type=float, default=None, help='protocol')
-    add('--milestones', type=int, nargs='*', default=None, help='protocol')
-    add('--gamma', type=float, default=None, help='protocol')
-    add('--weight-decay', type=float, default=None, help='protocol')
-    add('--label-smoothing', type=float, default=None, help='protocol')
-    add('--eval-every', type=int, default=5)
+    protocol = _protocol_option(add)
+    protocol('--epochs', type=int, help='epochs to train')
+    protocol('--batch-size', type=int,
+             help='the global batch: under torchrun each of the N '
+             'processes takes 1/N of it (a multiple of N)')
+    protocol('--optimizer', choices=['adam', 'sgd'],
+             help='adam, or sgd with momentum 0.9')
+    protocol('--lr', type=float, help='the learning rate at the start')
+    protocol('--schedule', choices=['cosine', 'step'],
+             help='cosine to --lr-min, or step: times --gamma at every '
+             '--milestones epoch')
+    protocol('--lr-min', type=float,
+             help='the learning rate the cosine schedule ends at')
+    protocol('--milestones', type=int, nargs='*',
+             help='epochs at which the step schedule multiplies the '
+             'learning rate by --gamma')
+    protocol('--gamma', type=float,
+             help="the step schedule's factor at each milestone")
+    protocol('--weight-decay', type=float,
+             help="the optimiser's weight decay")
+    protocol('--label-smoothing', type=float,
+             help='label smoothing of the cross-entropy loss')
+    add('--eval-every', type=int, default=5,
+        help='evaluate on the test set every N epochs, and after the last '
+        '(default: %(default)s)')
 
 
 def _augmentation_options(add):
     """Options: random rotations, scales and offsets."""
-    add('--rotate', default=None, nargs='?', const='so3', choices=ROTATIONS,
-        help='protocol; random rotations: so3 (uniform; the value of a bare '
-        '--rotate), about one axis, or about x, y, z in turn (xyz)')
-    add('--max-angle', type=float, default=None,
-        help='protocol; largest angle about an axis, degrees')
-    add('--scale', type=float, nargs=2, default=None, metavar=('LOW', 'HIGH'),
-        help='protocol; random scale factors (1 1: none)')
-    add('--anisotropic', default=None, action=argparse.BooleanOptionalAction,
-        help='protocol; one scale factor per axis')
-    add('--translate', type=float, default=None,
-        help='protocol; largest random offset of the whole shape')
+    protocol = _protocol_option(add)
+    protocol('--rotate', nargs='?', const='so3', choices=ROTATIONS,
+             help='random rotations: so3 (uniform; the value of a bare '
+             '--rotate), about one axis, or about x, y, z in turn (xyz)')
+    protocol('--max-angle', type=float,
+             help='largest angle about an axis, degrees')
+    protocol('--scale', type=float, nargs=2, metavar=('LOW', 'HIGH'),
+             help='random scale factors (1 1: none)')
+    protocol('--anisotropic', action=argparse.BooleanOptionalAction,
+             help='one scale factor per axis')
+    protocol('--translate', type=float,
+             help='largest random offset of the whole shape')
 
 
 def _model_options(add):
     """Options: the models' widths, orders, rings and discs."""
-    add('--conv-channels', type=int, nargs='+', default=None,
-        help='protocol; DeltaConv widths')
-    add('--mlp-depth', type=int, default=None,
-        help='protocol; DeltaConv MLP depth')
-    add('--embedding-size', type=int, default=None, help='protocol')
-    add('--k', type=int, default=None, help='protocol; DeltaNet neighbours')
-    add('--regularizer', type=float, default=None,
-        help='protocol; DeltaNet MLS regulariser lambda')
+    protocol = _protocol_option(add)
+    protocol('--conv-channels', type=int, nargs='+', model='deltanet',
+             help='DeltaNet: the widths of its DeltaConv layers')
+    protocol('--mlp-depth', type=int, model='deltanet',
+             help="DeltaNet: the depth of each DeltaConv's MLPs")
+    protocol('--embedding-size', type=int, model='deltanet',
+             help='DeltaNet: the width of the global embedding')
+    protocol('--k', type=int, model='deltanet',
+             help='DeltaNet: neighbours of each point')
+    protocol('--regularizer', type=float, model='deltanet',
+             help="DeltaNet: the MLS operators' regulariser lambda")
     add('--no-vector-stream', action='store_true',
         help='ablation: drop the vector stream')
-    add('--hsn-channels', type=int, nargs=2, default=None,
-        help='protocol; hsn features on levels 0, 1')
-    add('--max-order', type=int, default=None,
-        help='protocol; hsn: highest rotation order (0: one stream)')
-    add('--rings', type=int, default=None, help='protocol')
+    protocol('--hsn-channels', type=int, nargs=2, model='hsn',
+             help='HSN: features on levels 0 and 1')
+    protocol('--max-order', type=int, model='hsn',
+             help='HSN: highest rotation order (0: one stream)')
+    protocol('--rings', type=int, model='hsn',
+             help="HSN: radial rings of each kernel's disc")
     add('--hsn-norm', default=DEFAULT_COMPLEX_NORM,
         choices=[norm or 'none' for norm in COMPLEX_NORMS],
         help='hsn: normalisation in the blocks; instance (statistics per '
         'mesh, the same in training and evaluation), batch (running '
         'statistics in evaluation; with one mesh per batch they fit no '
         f'mesh) or none (default: {DEFAULT_COMPLEX_NORM})')
-    add('--radius', type=float, default=None,
-        help='protocol; hsn: disc radius on unit-area meshes')
-    add('--resample-vertices', type=int, default=None,
-        help='protocol; hsn: farthest-point resample meshes to this many '
-        'vertices (0: keep them all)')
+    protocol('--radius', type=float, model='hsn',
+             help='HSN: disc radius on unit-area meshes')
+    protocol('--resample-vertices', type=int, model='hsn',
+             help='HSN: farthest-point resample meshes to this many '
+             'vertices (0 or none: keep them all)')
     add('--num-vertices', type=int, nargs=2, default=None,
         metavar=('LOW', 'HIGH'),
         help='hsn on synthetic_shrec: vertex range of the generated meshes '
         '(default 500 2000)')
-    add('--logmap-method', default='fast', choices=['fast', 'vector_heat'])
+    add('--logmap-method', default='fast', choices=['fast', 'vector_heat'],
+        help="HSN: how the log maps are computed; fast (the library's "
+        "own) or vector_heat (geometry-central's vector heat method, "
+        "needs potpourri3d) (default: %(default)s)")
 
 
 def _run_options(add, model_and_dataset: bool):
     """Options: seeds, devices, precision, resuming, processes."""
-    add('--seed', type=int, default=0)
+    add('--seed', type=int, default=0,
+        help='seeds the weights, the augmentation and the batch order '
+        '(default: %(default)s)')
     add('--data-seed', type=int, default=0,
         help='seeds the synthetic data, the point sampling and the '
         'per-class training split')
     add('--device', default='auto',
         help='auto (cuda when PyTorch finds a GPU, else cpu), cpu, cuda, '
         'cuda:N or mps (default: auto)')
-    add('--threads', type=int, default=0)
+    add('--threads', type=int, default=0,
+        help="torch's CPU threads; 0: the cores this process may use, "
+        'shared among the processes torchrun starts on this machine '
+        '(default: %(default)s)')
     add('--compile', action='store_true',
         help='train with torch.compile(dynamic=True): the same results '
         'within float rounding, faster once compiled (the first batches '

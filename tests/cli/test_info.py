@@ -22,16 +22,6 @@ def test_info(capsys):
     assert code == 0 and set(report['extras']) == set(EXTRAS)
 
 
-def test_every_extra_of_the_installed_package_is_listed():
-    """The extras info lists are those pip knows of this package (from
-    its installed metadata, which setup.py wrote from the same list)."""
-    provided = importlib.metadata.metadata('tg_intrinsic').get_all(
-        'Provides-Extra')
-    assert set(provided) == set(EXTRAS)
-    assert {'textures', 'h5', 'digits', 'docs', 'heat', 'exr', 'mitsuba',
-            'scatter', 'benchmarks', 'test'} <= set(EXTRAS)
-
-
 def test_the_versions_are_the_installed_ones():
     import numpy
     import torch

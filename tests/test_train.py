@@ -411,14 +411,18 @@ def test_resuming_an_hsn_checkpoint_of_another_normalisation(
 def test_compiled_and_mixed_precision_training(tmp_path, modelnet_root):
     # without dropout (whose random numbers differ once compiled), a
     # compiled run follows the eager one up to rounding, which Adam's steps
-    # amplify (measured: mean losses 3e-4 and 2e-3 apart in epochs 1, 2)
+    # amplify (measured, mean losses apart in epochs 1 and 2: 3e-4 and
+    # 2e-3 on one machine, 6e-4 and 1.2e-2 on an AVX-512 Xeon, where the
+    # loss falls from 8.3 to 5.5 in the first epoch)
     common = ('--epochs', '2', '--dropout', '0', '--optimizer', 'adam')
     eager = run(tmp_path, *common, root=modelnet_root,
                 out=tmp_path / 'eager')
     compiled = run(tmp_path, *common, '--compile', root=modelnet_root,
                    out=tmp_path / 'compiled')
-    for a, b in zip(eager['history'], compiled['history']):
-        assert a['train_loss'] == pytest.approx(b['train_loss'], rel=1e-2)
+    for a, b, tolerance in zip(eager['history'], compiled['history'],
+                               (3e-3, 3e-2), strict=True):
+        assert a['train_loss'] == pytest.approx(b['train_loss'],
+                                                rel=tolerance)
     mixed = run(tmp_path, *common, '--precision', 'bf16-mixed',
                 root=modelnet_root, out=tmp_path / 'bf16')
     assert mixed['args']['precision'] == 'bf16-mixed'

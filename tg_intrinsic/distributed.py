@@ -149,9 +149,9 @@ def broadcast_buffers(module: torch.nn.Module, src: int = 0) -> None:
 
 
 def rank_zero_first(fn: Callable):
-    """Calls :obj:`fn` on rank 0 and, once it returned, on the other ranks
-    (which then read what rank 0 wrote, e.g. a data cache, instead of
-    racing to write it). A failure on rank 0 is raised on every rank."""
+    """Calls :obj:`fn` on rank 0 and, once it returned, on the other ranks,
+    which then read what rank 0 wrote (such as a data cache) instead of
+    racing to write it. A failure on rank 0 is raised on every rank."""
     if world_size() == 1:
         return fn()
     if rank() == 0:
@@ -170,8 +170,8 @@ def rank_zero_first(fn: Callable):
 
 
 def derived_seed(*numbers: int) -> int:
-    """A 32-bit seed derived from :obj:`numbers` (e.g. seed, epoch, rank),
-    independent streams for different tuples."""
+    """A 32-bit seed derived from :obj:`numbers` (such as seed, epoch and
+    rank), independent streams for different tuples."""
     return int(np.random.SeedSequence([int(n) for n in numbers])
                .generate_state(1)[0])
 

@@ -160,7 +160,7 @@ def operator_graph(edge_index: Tensor, num_nodes: int,
     r"""The record ``[[E, h]]`` per graph of a (batched) ``edge_index``
     that precompute transforms store beside per-edge operators (as
     ``data.operator_graph``): the number of edges :math:`E` and a
-    fingerprint :math:`h` of the edges in their order,
+    fingerprint :math:`h` of the edges in their order. The fingerprint is
 
     .. math::
         h = \sum_e a_e^3 \bmod p, \qquad

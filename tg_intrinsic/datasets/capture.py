@@ -23,10 +23,12 @@ def render_images(vertices: Tensor, faces: Tensor, vertex_normals: Tensor,
                   light_samples: int = 16, diffuse_resolution: int = 256,
                   seed: int = 0) -> Tensor:
     r"""Images of a mesh with per-vertex principled materials under a
-    distant environment map: :func:`~tg_intrinsic.geometry.appearance.raster.rasterize` every view, interpolate
-    position, normal (renormalised) and material with the perspective
-    correct barycentrics of the pixel centre's hit, and shade it towards
-    the camera centre with :func:`~tg_intrinsic.geometry.appearance.lighting.render_radiance`,
+    distant environment map. The steps:
+    :func:`~tg_intrinsic.geometry.appearance.raster.rasterize` every view,
+    interpolate position, normal (renormalised) and material with the
+    perspective correct barycentrics of the pixel centre's hit, and shade
+    it towards the camera centre with
+    :func:`~tg_intrinsic.geometry.appearance.lighting.render_radiance`,
 
     .. math::
         I_v(i, j) = B\big(\mathbf{n}(\mathbf{x}),

@@ -48,7 +48,8 @@ def open_folder(root: str, split: str, task: str = 'classification',
                 variant: str = 'PB_T50_RS', log: bool = True,
                 cache_root: Optional[str] = None):
     r"""The :obj:`split` of the data set in the local folder :obj:`root`,
-    read by the reader of its layout, recognised by its files:
+    read by the reader of its layout. The layout is recognised by its
+    files:
 
     * :obj:`modelnet40_shape_names.txt` (or :obj:`modelnet10_*`):
       :class:`ModelNetResampled` (the first :obj:`num_points` points);

@@ -22,9 +22,11 @@ def _lines(path: str) -> List[str]:
 
 class ModelNetResampled(FolderDataset):
     r"""ModelNet40 or ModelNet10 as the point clouds with normals that
-    PointNet++ (Qi et al., 2017) resampled from the meshes:
-    :obj:`modelnet40_normal_resampled/`, read from a local folder (nothing
-    is downloaded)::
+    PointNet++ resampled from the meshes, read from a local folder (nothing
+    is downloaded).
+
+    The folder is PointNet++'s (Qi et al., 2017)
+    :obj:`modelnet40_normal_resampled/`::
 
         modelnet40_normal_resampled/
         ├── modelnet40_shape_names.txt   one class per line: airplane, ...

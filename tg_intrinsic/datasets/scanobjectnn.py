@@ -25,10 +25,13 @@ LAYOUT = ("h5_files/main_split/training_objectdataset_augmentedrot_scale75.h5"
 
 
 class ScanObjectNN(FolderDataset):
-    r"""ScanObjectNN (Uy et al., "Revisiting point cloud classification: a
-    new benchmark dataset and classification model on real-world data",
-    ICCV 2019): 15 classes of scanned objects, 2048 points each, read from
-    the released HDF5 files in a local folder (nothing is downloaded)::
+    r"""ScanObjectNN, 15 classes of scanned objects with 2048 points each,
+    read from the released HDF5 files in a local folder (nothing is
+    downloaded).
+
+    The data set is from Uy et al., "Revisiting point cloud
+    classification: a new benchmark dataset and classification model on
+    real-world data" (ICCV 2019); its files are::
 
         h5_files/
         ├── main_split/

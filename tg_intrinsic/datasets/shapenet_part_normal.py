@@ -31,10 +31,12 @@ NUM_PARTS = int(_START[-1])
 
 
 class ShapeNetPartNormal(FolderDataset):
-    r"""ShapeNet-Part (Yi et al., 2016) as PointNet++ released it with
-    normals, :obj:`shapenetcore_partanno_segmentation_benchmark_v0_normal`,
-    read from a local folder (nothing is downloaded): 16 object categories
-    whose points carry one of 50 part labels::
+    r"""ShapeNet-Part as PointNet++ released it with normals, read from a
+    local folder (nothing is downloaded).
+
+    The data set (Yi et al., 2016) has 16 object categories whose points
+    carry one of 50 part labels, in
+    :obj:`shapenetcore_partanno_segmentation_benchmark_v0_normal`::
 
         shapenetcore_partanno_segmentation_benchmark_v0_normal/
         ├── synsetoffset2category.txt   "Airplane<TAB>02691156" per line

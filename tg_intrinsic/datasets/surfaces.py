@@ -12,7 +12,7 @@ def bumpy_torus(num_vertices: int = 204800, seed: int = 0) -> Data:
     r"""A closed torus (major radius 1, tube radius about 0.35) with random
     smooth bumps on the tube, triangulated on a regular :math:`n_u \times
     n_v` grid with :math:`n_u = 2 n_v` and :math:`n_u n_v \geq`
-    :obj:`num_vertices`:
+    :obj:`num_vertices`. The surface is
 
     .. math::
         \mathbf{x}(u, v) = \big((1 + r \cos v) \cos u,\ (1 + r \cos v)

@@ -166,10 +166,10 @@ def svbrdf_scene(shape: Union[str, Tuple[Tensor, Tensor]] = 'sphere',
                  dtype: torch.dtype = torch.float32) -> Data:
     r"""A synthetic multi-view capture of an object with a spatially varying
     principled BRDF under a distant environment map, whose ground truth is
-    the full reflection integral (:mod:`tg_intrinsic.geometry.appearance.lighting`),
-    not the spherical-harmonic approximation of the method under test
-    ("Uncertainty for SVBRDF acquisition using frequency analysis",
-    Wiersma et al., SIGGRAPH 2025):
+    the full reflection integral, not the spherical-harmonic approximation
+    of the method under test. The method is that of "Uncertainty for SVBRDF
+    acquisition using frequency analysis" (Wiersma et al., SIGGRAPH 2025);
+    the ground truth (:mod:`tg_intrinsic.geometry.appearance.lighting`) is
 
     .. math::
         B(\mathbf{p}, \omega_o) = \int_{\Omega^+} f_r(\omega_i, \omega_o;

@@ -274,8 +274,8 @@ def edge_stretch(V, W, F):
 def correspondence_accuracy(pred: Tensor, target: Tensor, dist: Tensor,
                             thresholds: Sequence[float]) -> Tensor:
     r"""Fraction of predicted correspondences within each geodesic error
-    threshold (the curves of the Princeton benchmark, Kim et al., 2011, as
-    in the FAUST plot of Harmonic Surface Networks):
+    threshold. These are the curves of the Princeton benchmark (Kim et al.,
+    2011), as in the FAUST plot of Harmonic Surface Networks:
 
     .. math::
         a(t) = \frac{1}{N} \big|\{i : D_{\hat{y}_i y_i} \leq t \cdot

@@ -168,7 +168,8 @@ def cotan_weights(pos: Tensor, face: Tensor) -> Tensor:
 
 def cotan_laplacian(pos: Tensor, face: Tensor) -> Tensor:
     r"""The cotangent Laplacian as the positive semi-definite stiffness
-    matrix :math:`S` (MacNeal 1949; Pinkall and Polthier 1993):
+    matrix :math:`S` (MacNeal 1949; Pinkall and Polthier 1993). Its entries
+    are
 
     .. math::
         S_{ij} = -\frac{1}{2} (\cot \alpha_{ij} + \cot \beta_{ij}), \qquad
@@ -345,10 +346,10 @@ def laplacian_spectrum(pos: Tensor, face: Tensor,
                        num_eigenvalues: int = 16) -> Tensor:
     r"""The smallest non-zero eigenvalues of the cotan Laplacian,
     :math:`S \phi = \lambda M \phi` (lumped :math:`M`), times the surface
-    area :math:`A` so that they do not depend on the shape's size: the
-    "Shape-DNA" descriptor of Reuter et al. (2006), invariant to isometric
-    (non-rigid) deformations. On the unit sphere, :math:`\lambda A = 4\pi
-    l(l + 1)` with multiplicity :math:`2l + 1`.
+    area :math:`A` so that they do not depend on the shape's size. They are
+    the "Shape-DNA" descriptor of Reuter et al. (2006), invariant to
+    isometric (non-rigid) deformations. On the unit sphere,
+    :math:`\lambda A = 4\pi l(l + 1)` with multiplicity :math:`2l + 1`.
 
     Uses shift-invert Lanczos (``scipy.sparse.linalg.eigsh``) in float64 on
     the CPU; the mesh must be connected (a second zero eigenvalue would
@@ -387,9 +388,9 @@ def laplacian_spectrum(pos: Tensor, face: Tensor,
 
 def weld_vertices(pos: Tensor, face: Tensor, tolerance: float = 0.0
                   ) -> Tuple[Tensor, Tensor, Tensor]:
-    r"""Merges vertices at the same position, e.g. to turn a triangle soup
-    (every face with its own three vertices, as many exporters write OBJ
-    files) into a connected mesh.
+    r"""Merges vertices at the same position, for example to turn a triangle
+    soup (every face with its own three vertices, as many exporters write
+    OBJ files) into a connected mesh.
 
     With :obj:`tolerance=0` exactly equal positions are merged. With
     :obj:`tolerance > 0`, vertices closer than :obj:`tolerance` times the

@@ -21,7 +21,7 @@ def _pair(xy: Tensor, name: str) -> Tensor:
 
 def square_to_disc(xy: Tensor) -> Tensor:
     r"""The elliptical grid mapping of the square :math:`[-1, 1]^2` onto the
-    unit disc,
+    unit disc. It is
 
     .. math::
         u = x \sqrt{1 - y^2 / 2}, \qquad v = y \sqrt{1 - x^2 / 2};
@@ -43,7 +43,7 @@ def square_to_disc(xy: Tensor) -> Tensor:
 
 
 def disc_to_square(uv: Tensor) -> Tensor:
-    r"""The inverse of :func:`square_to_disc`,
+    r"""The inverse of :func:`square_to_disc`. It is
 
     .. math::
         x = \tfrac12 \sqrt{2 + u^2 - v^2 + 2\sqrt2\, u}
@@ -77,7 +77,8 @@ def disc_to_hemisphere(uv: Tensor) -> Tensor:
     hemisphere: the disc's centre goes to the pole :math:`(0, 0, 1)`, its
     radius :math:`\rho` to the polar angle :math:`\vartheta = \rho\pi/2`
     (geodesic distances from the pole are kept up to the factor
-    :math:`\pi/2`), its circle to the equator:
+    :math:`\pi/2`), its circle to the equator. The image of
+    :math:`(u, v)` is
 
     .. math::
         \mathbf{p} = \big(\sin\vartheta\,\tfrac{u}{\rho},\

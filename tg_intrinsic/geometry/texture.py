@@ -78,7 +78,8 @@ def rasterize_uv(face_uv: Tensor, height: int, width: int
                  ) -> Tuple[Tensor, Tensor, Tensor]:
     r"""The texels of an :math:`(H, W)` texture whose centres
     :math:`(u_c, v_r)` (see the module) lie in a UV triangle, with that
-    triangle and the barycentric coordinates of the centre in it,
+    triangle and the barycentric coordinates of the centre in it. The
+    coordinates :math:`\lambda` satisfy
 
     .. math::
         (u_c, v_r) = \sum_{k=0}^{2} \lambda_k\, (u, v)_{f, k},
@@ -179,7 +180,7 @@ def texture_grid_edges(texel_index: Tensor, texture_shape) -> Tensor:
 def uv_sphere(rows: int = 16, cols: int = 32,
               dtype: torch.dtype = torch.float64
               ) -> Tuple[Tensor, Tensor, Tensor]:
-    r"""A unit latitude-longitude sphere with per-vertex UVs, the
+    r"""A unit latitude-longitude sphere with per-vertex UVs. They follow the
     equirectangular map
 
     .. math::
@@ -354,7 +355,7 @@ def grid_atlas(num_faces: int, dtype: torch.dtype = torch.float64
 
 def bake_texture(values: Tensor, face: Tensor, face_uv: Tensor,
                  texture_shape) -> Tuple[Tensor, Tensor]:
-    r"""Per-vertex values as an :math:`(H, W)` texture: every texel whose
+    r"""Per-vertex values as an :math:`(H, W)` texture. Every texel whose
     centre a UV triangle covers (:func:`rasterize_uv`) takes the values of
     the triangle's corners interpolated by its barycentrics,
 

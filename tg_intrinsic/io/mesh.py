@@ -764,9 +764,9 @@ def write_ply(path: str, pos: np.ndarray, face: Optional[np.ndarray] = None,
               colors: Optional[np.ndarray] = None,
               typed_properties: Optional[Dict[str, np.ndarray]] = None
               ) -> str:
-    """Writes a binary little-endian PLY atomically: positions as doubles,
-    then every entry of ``typed_properties`` in its own numeric type
-    (e.g. the vertex properties of an input file from
+    """Writes a binary little-endian PLY atomically. It holds positions
+    as doubles, then every entry of ``typed_properties`` in its own
+    numeric type (e.g. the vertex properties of an input file from
     :func:`read_surface`, kept as they were: ``uchar`` colours stay
     ``uchar``, ``float`` stays ``float``; 64-bit integers become ``int``
     or ``uint`` when they fit, else ``double``), ``colors`` (``(N, 3)``

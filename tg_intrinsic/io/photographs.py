@@ -65,7 +65,7 @@ class LDRPhoto(NamedTuple):
 
 
 def srgb_to_linear(values: np.ndarray) -> np.ndarray:
-    r"""The sRGB decoding curve of IEC 61966-2-1,
+    r"""The sRGB decoding curve of IEC 61966-2-1. It is
 
     .. math::
         L = \begin{cases} c / 12.92, & c \le 0.04045, \\
@@ -239,7 +239,7 @@ def _positive(value) -> Optional[float]:
 
 
 def exif_exposure(path) -> Optional[float]:
-    r"""The relative exposure of a photograph from its EXIF tags,
+    r"""The relative exposure of a photograph from its EXIF tags. It is
 
     .. math::
         e = \frac{t\,S}{N^2},

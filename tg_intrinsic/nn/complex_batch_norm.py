@@ -9,7 +9,7 @@ class ComplexBatchNorm(torch.nn.Module):
     r"""Batch normalisation of complex stream features on their magnitudes:
     every channel of every stream is divided by the root mean square of its
     magnitude over all points of the batch and scaled by a learned
-    :math:`\gamma`; the phase is kept,
+    :math:`\gamma`; the phase is kept. It computes
 
     .. math::
         z' = \gamma\, \frac{z}{\sqrt{\mathrm{E}[|z|^2] + \epsilon}} .
@@ -50,6 +50,20 @@ class ComplexBatchNorm(torch.nn.Module):
         self.running_square.fill_(1.0)
 
     def forward(self, z: Tensor) -> Tensor:
+        r"""Normalises the magnitudes of the complex stream features
+        :obj:`z`.
+
+        In training mode the mean square magnitude is taken over the
+        :math:`N` points of :obj:`z` and updates the running value; in
+        evaluation mode (or for an empty batch) the running value is used.
+
+        Args:
+            z (torch.Tensor): Complex features :math:`(N, S, C)`.
+
+        Returns:
+            torch.Tensor: Complex features :math:`(N, S, C)` with the phases
+            of :obj:`z`.
+        """
         check_streams(z, 'z')
         if tuple(z.shape[1:]) != (self.streams, self.channels):
             raise ValueError(f"expected complex features [N, {self.streams}, "

@@ -13,7 +13,7 @@ class ComplexInstanceNorm(torch.nn.Module):
     r"""Instance normalisation of complex stream features on their
     magnitudes: every channel of every stream of every shape is divided by
     the root mean square of its magnitude over that shape's points and
-    scaled by a learned :math:`\gamma`; the phase is kept,
+    scaled by a learned :math:`\gamma`; the phase is kept. It computes
 
     .. math::
         z_i' = \gamma\, \frac{z_i}{\sqrt{\frac{1}{|V_g|} \sum_{j \in V_g}
@@ -54,6 +54,20 @@ class ComplexInstanceNorm(torch.nn.Module):
 
     def forward(self, z: Tensor, batch: Optional[Tensor] = None,
                 num_shapes: Optional[int] = None) -> Tensor:
+        r"""Normalises the magnitudes of :obj:`z` per shape.
+
+        Args:
+            z (torch.Tensor): Complex features :math:`(N, S, C)`.
+            batch (torch.Tensor, optional): The shape index of every point
+                :math:`(N)` (PyG's ``batch`` vector); :obj:`None` treats all
+                points as one shape. (default: :obj:`None`)
+            num_shapes (int, optional): The number of shapes; computed from
+                :obj:`batch` if not given. (default: :obj:`None`)
+
+        Returns:
+            torch.Tensor: Complex features :math:`(N, S, C)` with the phases
+            of :obj:`z`.
+        """
         check_streams(z, 'z')
         if tuple(z.shape[1:]) != (self.streams, self.channels):
             raise ValueError(f"expected complex features [N, {self.streams}, "

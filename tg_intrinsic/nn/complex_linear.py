@@ -12,7 +12,7 @@ from tg_intrinsic.geometry.precision import (complex_from, full_precision,
 class ComplexLinear(torch.nn.Module):
     r"""A linear map of complex stream features with real weights, applied
     alike to the real and imaginary parts of every stream (Harmonic Surface
-    Networks),
+    Networks). It computes
 
     .. math::
         \mathbf{z}'^{M} = \mathbf{z}^{M} W + [M = 0]\, \mathbf{b} .
@@ -52,6 +52,15 @@ class ComplexLinear(torch.nn.Module):
             torch.nn.init.zeros_(self.bias)
 
     def forward(self, z: Tensor) -> Tensor:
+        r"""Maps the channels of every stream of :obj:`z`.
+
+        Args:
+            z (torch.Tensor): Complex features :math:`(N, S, C_{in})`.
+
+        Returns:
+            torch.Tensor: Complex features :math:`(N, S, C_{out})`, with the
+            bias added to stream 0 only.
+        """
         check_streams(z, 'z')
         refuse_low_precision(self.weight, 'weights', 'ComplexLinear')
         if z.size(-1) != self.in_channels:

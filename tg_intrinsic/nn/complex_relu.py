@@ -7,7 +7,7 @@ from tg_intrinsic.geometry.checks import check_positive_int, check_streams
 
 class ComplexReLU(torch.nn.Module):
     r"""The C-ReLU of Harmonic Surface Networks: a ReLU on the magnitude of
-    complex features with a learned bias, keeping their phase,
+    complex features with a learned bias, keeping their phase. It computes
 
     .. math::
         \sigma(z) = \operatorname{ReLU}(|z| + b)\, \frac{z}{|z|},
@@ -32,6 +32,15 @@ class ComplexReLU(torch.nn.Module):
         torch.nn.init.zeros_(self.bias)
 
     def forward(self, z: Tensor) -> Tensor:
+        r"""Applies the C-ReLU to the complex stream features :obj:`z`.
+
+        Args:
+            z (torch.Tensor): Complex features :math:`(N, S, C)`.
+
+        Returns:
+            torch.Tensor: Complex features :math:`(N, S, C)` with the phases
+            of :obj:`z` (zero where :math:`|z| + b \leq 0` or :math:`z = 0`).
+        """
         check_streams(z, 'z')
         if z.size(-1) != self.channels:
             raise ValueError(f"expected complex features [N, streams, "

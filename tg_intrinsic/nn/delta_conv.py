@@ -32,7 +32,7 @@ class DeltaConv(MessagePassing):
     r"""The DeltaConv operator from the `"DeltaConv: Anisotropic Operators
     for Geometric Deep Learning on Point Clouds"
     <https://arxiv.org/abs/2111.08799>`_ paper (SIGGRAPH 2022), with a scalar
-    and a vector stream:
+    and a vector stream. It computes
 
     .. math::
         \mathbf{v}'_i &= h_0\big(\mathbf{v}, G\mathbf{x}, \Delta_H
@@ -127,12 +127,36 @@ class DeltaConv(MessagePassing):
                 operators: Optional[SurfaceOperators],
                 backend: Optional[str] = None
                 ) -> Tuple[Tensor, Optional[Tensor]]:
-        """``backend``: ``'sparse'`` (sparse products and dense
-        neighbour reductions), ``'message'`` (every operator as per-edge
-        messages through :meth:`propagate`, so that edge masks, explainers
-        and propagate hooks see every edge), or :obj:`None`: messages while
-        an edge mask or a hook is set, sparse otherwise. Both compute the
-        same values."""
+        r"""Computes the layer's scalar and vector outputs.
+
+        Args:
+            x (torch.Tensor): Scalar features :math:`(N, C_{in})`.
+            v (torch.Tensor, optional): Vector features
+                :math:`(N, C_{in}, 2)` in the points' tangent frames (for a
+                first layer, :obj:`operators.grad(x)`); :obj:`None` for a
+                layer built with :obj:`vector_input=False`.
+            edge_index (torch.Tensor): The neighbour graph :math:`(2, E)` of
+                the aggregation of :math:`h_2`, in PyG's flow; usually the
+                graph the :obj:`operators` were built on (that tensor is
+                reduced without per-edge messages, and per-edge messages
+                require it, or an equal one, whenever :obj:`operators` is
+                given).
+            operators (SurfaceOperators, optional): Gradient and divergence
+                built on the same points; :obj:`None` only for a layer built
+                with :obj:`vector_input=False`.
+            backend (str, optional): :obj:`"sparse"` (sparse products and
+                dense neighbour reductions), :obj:`"message"` (every
+                operator as per-edge messages through :meth:`propagate`, so
+                that edge masks, explainers and propagate hooks see every
+                edge), or :obj:`None`: messages while an edge mask or a hook
+                is set, sparse otherwise. Both compute the same values.
+                (default: :obj:`None`)
+
+        Returns:
+            (torch.Tensor, torch.Tensor or None): Scalar features
+            :math:`(N, C_{out})` and vector features :math:`(N, C_{out}, 2)`
+            (:obj:`None` if :obj:`vector=False`).
+        """
         if not compiling():  # validated once, outside a compiled graph
             self._check_inputs(x, v, edge_index, operators)
         if self._uses_messages(backend):

@@ -57,9 +57,10 @@ _NEEDED = ('sh_in', 'mirror_dir', 'irradiance',
 
 
 class FrequencySVBRDF(torch.nn.Module):
-    r"""Per-point principled SVBRDF parameters with the differentiable
-    spherical-harmonic reflection model of Wiersma et al., "Uncertainty for
-    SVBRDF Acquisition using Frequency Analysis" (SIGGRAPH 2025, eq. 5.11),
+    r"""Per-point principled SVBRDF parameters with a differentiable
+    spherical-harmonic reflection model. The model is eq. 5.11 of
+    Wiersma et al., "Uncertainty for SVBRDF Acquisition using Frequency
+    Analysis" (SIGGRAPH 2025),
 
     .. math::
         B(p, \omega_o) = \frac{K_d}{\pi} E(p) + F(\theta_o)\,
@@ -184,9 +185,26 @@ class FrequencySVBRDF(torch.nn.Module):
 
     def forward(self, data: Data, sh_in: Tensor = None,
                 basis: Tensor = None) -> Tensor:
-        """Predicted radiance at every observation :math:`(N, V, 3)`.
-        ``sh_in`` (default ``data.sh_in``) and ``basis`` (harmonics at the
-        mirror directions) may be passed precomputed."""
+        r"""Predicts the radiance of every point towards every view.
+
+        Args:
+            data (torch_geometric.data.Data): Prepared by
+                :class:`~tg_intrinsic.transforms.ProjectViews` and
+                :class:`~tg_intrinsic.transforms.FitSphericalHarmonics`,
+                with :math:`N` points and :math:`V` views.
+            sh_in (torch.Tensor, optional): The incoming light in spherical
+                harmonics per point :math:`(N, K, 3)`, e.g. with the
+                shadowing applied; :obj:`None` reads ``data.sh_in``.
+                (default: :obj:`None`)
+            basis (torch.Tensor, optional): The harmonics :math:`(N, V, K)`
+                at the mirror directions (at the lobes' dominant directions
+                with :obj:`specular_model='split_sum'`), if already
+                computed. (default: :obj:`None`)
+
+        Returns:
+            torch.Tensor: The predicted radiance :math:`(N, V, 3)`, in the
+            dtype of :obj:`sh_in`.
+        """
         self._check(data)
         if sh_in is None:
             sh_in = data.sh_in

@@ -27,7 +27,7 @@ HIERARCHY_NEIGHBOURS = 8
 
 class GravoDiffusion(torch.nn.Module):
     r"""Learned heat diffusion with one time per channel, solved by Gravo
-    MG: the learned diffusion layer of DiffusionNet (Sharp et al.,
+    MG. It is the learned diffusion layer of DiffusionNet (Sharp et al.,
     "DiffusionNet: Discretization Agnostic Learning on Surfaces", TOG 2022)
     in its implicit form, on the multigrid solver of Wiersma et al.
     ("A Fast Geometric Multigrid Method for Curved Surfaces", SIGGRAPH
@@ -125,9 +125,32 @@ class GravoDiffusion(torch.nn.Module):
     def forward(self, x: Tensor, data: Optional[Data] = None,
                 stiffness: Optional[sp.spmatrix] = None,
                 mass=None, gravo: Optional[GravoMG] = None) -> Tensor:
-        """Diffuses the features ``x`` :math:`(N, C)` on the surface of
-        ``data``, or with the given ``stiffness`` and ``mass`` (and, for
-        Gravo MG, the ``gravo`` solver or the hierarchy of ``data``)."""
+        r"""Diffuses every channel of :obj:`x` for its own learned time.
+
+        The surface is that of :obj:`data`, or given by :obj:`stiffness`
+        and :obj:`mass` (and, for Gravo MG, the :obj:`gravo` solver or the
+        hierarchy of :obj:`data`).
+
+        Args:
+            x (torch.Tensor): Features :math:`(N, C)`, one row per point.
+            data (torch_geometric.data.Data, optional): The surface, with
+                ``pos`` :math:`(N, 3)` and optionally ``face``
+                :math:`(3, F)` and ``batch`` :math:`(N)`; its operators and
+                hierarchy are built on first use and cached.
+                (default: :obj:`None`)
+            stiffness (scipy.sparse.spmatrix, optional): A precomputed
+                stiffness matrix :math:`S` :math:`(N, N)`, passed together
+                with :obj:`mass`. (default: :obj:`None`)
+            mass (numpy.ndarray or torch.Tensor, optional): The lumped
+                masses :math:`M` :math:`(N)`. (default: :obj:`None`)
+            gravo (GravoMG, optional): A Gravo MG solver on the same points;
+                without it, the hierarchy of :obj:`data` is used. Not
+                allowed with :obj:`solver='direct'`. (default: :obj:`None`)
+
+        Returns:
+            torch.Tensor: The diffused features :math:`(N, C)`, in the dtype
+            and on the device of :obj:`x`.
+        """
         x = check_tensor(x, 'x')
         if x.dim() != 2:
             raise ValueError(

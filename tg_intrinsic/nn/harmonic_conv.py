@@ -126,12 +126,40 @@ class HarmonicConv(MessagePassing):
                 transport: Optional[Tensor] = None,
                 operator: Optional[HarmonicOperator] = None,
                 backend: Optional[str] = None) -> Tensor:
-        """Pass either the disc graph with its precomputed ``harmonic`` and
-        ``transport``, or an ``operator`` built once on them and shared by
-        several layers. ``backend``: ``'sparse'``, ``'message'`` (per-edge
-        messages through :meth:`propagate`), or :obj:`None`: messages while
-        an edge mask (PyG's explainers) or a propagate hook is set, sparse
-        otherwise; both compute the same values."""
+        r"""Convolves the complex stream features :obj:`x` on the disc
+        graph.
+
+        Pass either the disc graph with its precomputed :obj:`harmonic` and
+        :obj:`transport`, or an :obj:`operator` built once on them and
+        shared by several layers.
+
+        Args:
+            x (torch.Tensor): Complex features :math:`(N, P + 1, C_{in})`,
+                or real features :math:`(N, C_{in})`, taken as stream 0
+                (then :math:`P = 0`).
+            edge_index (torch.Tensor, optional): The disc graph
+                :math:`(2, E)`, in PyG's flow. (default: :obj:`None`)
+            harmonic (torch.Tensor, optional): The harmonic terms of every
+                edge, complex :math:`(E, Q, K)` with
+                :math:`K \geq \max(P, O) + 1` (``data.harmonic`` of
+                :class:`~tg_intrinsic.transforms.HarmonicPrecompute`).
+                (default: :obj:`None`)
+            transport (torch.Tensor, optional): The parallel transport angle
+                :math:`\phi_{ji}` of every edge :math:`(E)`.
+                (default: :obj:`None`)
+            operator (HarmonicOperator, optional): The aggregation built on
+                the disc graph for :math:`P + 1 \to O + 1` orders and
+                :math:`Q` rings; with :obj:`backend="message"` and no
+                :obj:`edge_index`, its graph is used. (default: :obj:`None`)
+            backend (str, optional): :obj:`"sparse"`, :obj:`"message"`
+                (per-edge messages through :meth:`propagate`), or
+                :obj:`None`: messages while an edge mask (PyG's explainers)
+                or a propagate hook is set, sparse otherwise; both compute
+                the same values. (default: :obj:`None`)
+
+        Returns:
+            torch.Tensor: Complex features :math:`(N, O + 1, C_{out})`.
+        """
         if backend is None:
             backend = 'message' if sets_per_edge_machinery(self) \
                 else 'sparse'

@@ -52,7 +52,8 @@ def apply_complex_norm(norm: torch.nn.Module, z: Tensor,
 class HarmonicResNetBlock(torch.nn.Module):
     r"""A residual block of Harmonic Surface Networks: two harmonic
     convolutions with C-ReLU, and a skip connection (a
-    :class:`ComplexLinear` without bias when the widths differ),
+    :class:`ComplexLinear` without bias when the widths differ). It
+    computes
 
     .. math::
         \mathbf{z}' = \sigma\Big(\mathrm{N}\big(
@@ -120,11 +121,24 @@ class HarmonicResNetBlock(torch.nn.Module):
     def forward(self, z: Tensor, operators: dict,
                 batch: Optional[Tensor] = None,
                 num_shapes: Optional[int] = None) -> Tensor:
-        """``operators`` maps ``(in_orders, out_orders)`` to the
-        :class:`HarmonicOperator` of this level (see
-        :func:`harmonic_operators`); ``batch`` is the shape index of every
-        point (PyG's ``batch`` on this level; :obj:`None`: one shape), which
-        the instance normalisation needs."""
+        r"""Applies the block to the complex stream features :obj:`z`.
+
+        Args:
+            z (torch.Tensor): Complex features :math:`(N, P + 1, C_{in})`.
+            operators (dict): Maps ``(in_orders, out_orders)`` to the
+                :class:`HarmonicOperator` of this level (see
+                :func:`harmonic_operators`); it must hold the pairs
+                :math:`(P + 1, O + 1)` and :math:`(O + 1, O + 1)`.
+            batch (torch.Tensor, optional): The shape index of every point
+                :math:`(N)` (PyG's ``batch`` on this level), which the
+                instance normalisation needs; :obj:`None`: one shape.
+                (default: :obj:`None`)
+            num_shapes (int, optional): The number of shapes; computed from
+                :obj:`batch` if not given. (default: :obj:`None`)
+
+        Returns:
+            torch.Tensor: Complex features :math:`(N, O + 1, C_{out})`.
+        """
         p, o = self.prev_order + 1, self.max_order + 1
         missing = [pair for pair in ((p, o), (o, o))
                    if not isinstance(operators, dict) or pair not in operators]

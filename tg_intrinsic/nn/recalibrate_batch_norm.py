@@ -45,7 +45,7 @@ def recalibrate_batch_norm(model: torch.nn.Module, batches: Iterable,
     r"""Replaces the running statistics of every batch norm of
     :obj:`model` by their average over :obj:`batches` under the final
     weights ("precise batch norm", `Wu and Johnson, "Rethinking 'Batch' in
-    BatchNorm" <https://arxiv.org/abs/2105.07576>`_):
+    BatchNorm" <https://arxiv.org/abs/2105.07576>`_). It sets
 
     .. math::
         \mu = \frac{1}{B} \sum_{b=1}^{B} \mu_b, \qquad

@@ -19,7 +19,8 @@ class SyncBatchNorm(_BatchNorm):
     all processes of a data-parallel run, on the CPU as well as on GPUs
     (`"Batch Normalization: Accelerating Deep Network Training by Reducing
     Internal Covariate Shift" <https://arxiv.org/abs/1502.03167>`_; the
-    cross-process statistics as in :class:`torch.nn.SyncBatchNorm`):
+    cross-process statistics as in :class:`torch.nn.SyncBatchNorm`). It
+    computes
 
     .. math::
         \mu = \frac{1}{n} \sum_{r} \sum_{i \in B_r} x_i, \quad
@@ -81,6 +82,19 @@ class SyncBatchNorm(_BatchNorm):
         return all_reduce_sum(sums, group)
 
     def forward(self, input: Tensor) -> Tensor:
+        r"""Normalises :obj:`input` with the statistics of all processes.
+
+        In training mode inside a process group of more than one process the
+        statistics are all-reduced over the group; otherwise this is the
+        batch norm of :class:`torch.nn.BatchNorm1d`.
+
+        Args:
+            input (torch.Tensor): Features :math:`(N, C)` or
+                :math:`(N, C, *)`.
+
+        Returns:
+            torch.Tensor: Normalised features of the shape of :obj:`input`.
+        """
         check_tensor(input, 'input')
         self._check_input_dim(input)
         group = active_group(self.process_group)

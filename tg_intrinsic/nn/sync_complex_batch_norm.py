@@ -11,7 +11,7 @@ class SyncComplexBatchNorm(ComplexBatchNorm):
     r""":class:`ComplexBatchNorm` whose mean square magnitude is taken over
     the batches of all processes of a data-parallel run (`"Harmonic Surface
     Networks" <https://arxiv.org/abs/1909.07776>`_'s complex batch norm,
-    synchronised as in :class:`torch.nn.SyncBatchNorm`):
+    synchronised as in :class:`torch.nn.SyncBatchNorm`). It computes
 
     .. math::
         z' = \gamma\, \frac{z}{\sqrt{\frac{1}{n} \sum_r \sum_{i \in B_r}
@@ -45,6 +45,20 @@ class SyncComplexBatchNorm(ComplexBatchNorm):
         self.process_group = process_group
 
     def forward(self, z: Tensor) -> Tensor:
+        r"""Normalises the magnitudes of :obj:`z` with the mean square
+        magnitude over the points of all processes.
+
+        In evaluation mode, outside a process group of more than one
+        process, or when no process has any point, this is
+        :meth:`ComplexBatchNorm.forward`.
+
+        Args:
+            z (torch.Tensor): Complex features :math:`(N, S, C)`.
+
+        Returns:
+            torch.Tensor: Complex features :math:`(N, S, C)` with the phases
+            of :obj:`z`.
+        """
         group = active_group(self.process_group)
         if not self.training or group is None:
             return super().forward(z)

@@ -9,7 +9,8 @@ from tg_intrinsic.geometry.pointcloud.operators import interleaved, planar
 
 
 class VectorLinear(torch.nn.Module):
-    r"""A bias-free linear map between channels of tangent vector features,
+    r"""A bias-free linear map between channels of tangent vector features.
+    It computes
 
     .. math::
         v'_{i, o} = \sum_c W_{oc} \, v_{i, c},
@@ -39,6 +40,16 @@ class VectorLinear(torch.nn.Module):
         torch.nn.init.kaiming_uniform_(self.weight, a=math.sqrt(5))
 
     def forward(self, v: Tensor) -> Tensor:
+        r"""Maps the channels of the tangent vector features :obj:`v`.
+
+        Args:
+            v (torch.Tensor): Vector features :math:`(N, C_{in}, 2)`, the two
+                coordinates of every channel in its point's tangent frame.
+
+        Returns:
+            torch.Tensor: Vector features :math:`(N, C_{out}, 2)` in the
+            same frames.
+        """
         check_vector_features(v, 'v', self.in_channels)
         # On the [2, N, C] planes this is one matrix product, no copies.
         return interleaved(torch.nn.functional.linear(planar(v), self.weight))

@@ -9,8 +9,9 @@ from tg_intrinsic.nn.vector_nonlin import VectorNonLin
 
 
 class VectorMLP(torch.nn.Module):
-    r"""A multi-layer perceptron on tangent vector features: alternating
-    :class:`VectorLinear` and :class:`VectorNonLin`,
+    r"""A multi-layer perceptron on tangent vector features, alternating
+    :class:`VectorLinear` and :class:`VectorNonLin` layers. Each layer
+    computes
 
     .. math::
         v^{(l + 1)} = \sigma_{\|\cdot\|}\big(W^{(l)} v^{(l)}\big).
@@ -40,6 +41,16 @@ class VectorMLP(torch.nn.Module):
             layer.reset_parameters()
 
     def forward(self, v: Tensor) -> Tensor:
+        r"""Applies the layers to the tangent vector features :obj:`v`.
+
+        Args:
+            v (torch.Tensor): Vector features :math:`(N, C_0, 2)` in the
+                points' tangent frames.
+
+        Returns:
+            torch.Tensor: Vector features :math:`(N, C_L, 2)` in the same
+            frames.
+        """
         return self.layers(v)
 
     def __repr__(self) -> str:

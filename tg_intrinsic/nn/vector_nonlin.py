@@ -9,7 +9,7 @@ from tg_intrinsic.geometry.pointcloud.operators import (interleaved, planar,
 
 class VectorNonLin(torch.nn.Module):
     r"""A nonlinearity on the norms of tangent vectors that keeps their
-    directions (DeltaConv),
+    directions (DeltaConv). It computes
 
     .. math::
         v'_{i, c} = \frac{\mathrm{ReLU}(\mathrm{BN}(\|v_{i, c}\|))}
@@ -50,6 +50,16 @@ class VectorNonLin(torch.nn.Module):
             torch.nn.init.zeros_(self.bias)
 
     def forward(self, v: Tensor) -> Tensor:
+        r"""Rescales every vector of :obj:`v` by its activated norm.
+
+        Args:
+            v (torch.Tensor): Vector features :math:`(N, C, 2)` in the
+                points' tangent frames.
+
+        Returns:
+            torch.Tensor: Vector features :math:`(N, C, 2)` with the
+            directions of :obj:`v`, or zero where the ReLU is zero.
+        """
         check_vector_features(v, 'v', self.channels)
         # The norm with an eps inside the root keeps gradients finite at 0.
         length = vector_norm(v, self.eps)

@@ -100,7 +100,7 @@ def dense_max_pool(dense: Tensor) -> Tensor:
 
 def global_max_pool(x: Tensor, batch: Optional[Tensor],
                     size: Optional[int] = None) -> Tensor:
-    r"""Channel-wise maximum over the points of every example,
+    r"""Channel-wise maximum over the points of every example. It computes
 
     .. math::
         \mathbf{r}_b = \max_{i : \mathrm{batch}_i = b} \mathbf{x}_i ,

@@ -8,7 +8,7 @@ from tg_intrinsic.geometry.checks import (check_positive_int,
 class GravoPool(torch.nn.Module):
     r"""Pooling to the next level of a Gravo MG hierarchy by the normalised
     restriction: every coarse point takes the average of the fine points
-    that interpolate from it, weighted by the prolongation,
+    that interpolate from it, weighted by the prolongation. It computes
 
     .. math::
         x^{(l+1)}_c = \frac{\sum_i P_{ic}\, x^{(l)}_i}{\sum_i P_{ic}},
@@ -25,6 +25,20 @@ class GravoPool(torch.nn.Module):
     """
     def forward(self, x: Tensor, prolong_index: Tensor,
                 prolong_weight: Tensor, num_coarse: int) -> Tensor:
+        r"""Pools the features :obj:`x` to the next, coarser level.
+
+        Args:
+            x (torch.Tensor): Features :math:`(N_l, *)` of the fine level.
+            prolong_index (torch.Tensor): The nonzeros of the prolongation
+                :math:`P` :math:`(2, nnz)`, row 0 fine, row 1 coarse
+                (``prolong_index_l``).
+            prolong_weight (torch.Tensor): Their weights :math:`(nnz)`
+                (``prolong_weight_l``).
+            num_coarse (int): The number of coarse points :math:`N_{l+1}`.
+
+        Returns:
+            torch.Tensor: Features :math:`(N_{l+1}, *)`.
+        """
         num_coarse = check_positive_int(num_coarse, 'num_coarse', minimum=0)
         check_prolongation(x, prolong_index, prolong_weight, x.size(0),
                            'fine', num_coarse)

@@ -14,7 +14,7 @@ class ParallelTransportPool(torch.nn.Module):
     Surface Networks): every fine point :math:`j` belongs to the cluster of
     its geodesically nearest sample :math:`c(j)`, and a cluster takes the
     mean of its points' features after parallel transport into the
-    sample's frame,
+    sample's frame. It computes
 
     .. math::
         x_c^M = \frac{1}{|\{j : c(j) = c\}|} \sum_{j : c(j) = c}
@@ -39,6 +39,24 @@ class ParallelTransportPool(torch.nn.Module):
 
     def forward(self, x: Tensor, cluster: Tensor, transport: Tensor,
                 num_clusters: Optional[int] = None) -> Tensor:
+        r"""Pools the complex stream features :obj:`x` onto the clusters.
+
+        Args:
+            x (torch.Tensor): Complex features :math:`(N, S, C)` of the fine
+                points.
+            cluster (torch.Tensor): The cluster :math:`c(j)` of every fine
+                point :math:`(N)`, e.g. ``data.cluster_1``.
+            transport (torch.Tensor): The transport angle
+                :math:`\phi_{j \to c(j)}` of every fine point :math:`(N)`,
+                e.g. ``data.pool_transport_1``.
+            num_clusters (int, optional): The number of coarse points
+                :math:`N_c`; :obj:`None` takes the largest index of
+                :obj:`cluster` plus one. (default: :obj:`None`)
+
+        Returns:
+            torch.Tensor: Complex features :math:`(N_c, S, C)`, zero for an
+            empty cluster.
+        """
         # Checked first: index_add_ and bincount fail late or silently.
         x = check_streams(x, 'x')
         n = x.size(0)

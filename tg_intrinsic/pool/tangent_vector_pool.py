@@ -12,7 +12,7 @@ class TangentVectorPool(torch.nn.Module):
     :math:`(N, C, 2)`, each in its point's own frame) onto coarse points:
     every pooling edge :math:`(j, c)` parallel transports the fine vector
     into the coarse point's frame, and the coarse point takes the weighted
-    mean,
+    mean. It computes
 
     .. math::
         \mathbf{v}_c = \frac{\sum_{(j, c)} w_{jc}\, R(\phi_{j \to c})\,
@@ -38,6 +38,23 @@ class TangentVectorPool(torch.nn.Module):
     def forward(self, v: Tensor, pool_edge_index: Tensor,
                 pool_weight: Tensor, pool_transport: Tensor,
                 num_coarse: int) -> Tensor:
+        r"""Pools the tangent vector features :obj:`v` onto coarse points.
+
+        Args:
+            v (torch.Tensor): Vector features :math:`(N_l, C, 2)`, each in
+                its fine point's frame.
+            pool_edge_index (torch.Tensor): The pooling edges
+                :math:`(2, E)`, row 0 fine, row 1 coarse.
+            pool_weight (torch.Tensor): The weight :math:`w_{jc}` of every
+                edge :math:`(E)`.
+            pool_transport (torch.Tensor): The transport angle
+                :math:`\phi_{j \to c}` of every edge :math:`(E)`.
+            num_coarse (int): The number of coarse points :math:`N_{l+1}`.
+
+        Returns:
+            torch.Tensor: Vector features :math:`(N_{l+1}, C, 2)` in the
+            coarse points' frames.
+        """
         num_coarse = check_positive_int(num_coarse, 'num_coarse', minimum=0)
         v = check_tensor(v, 'v')
         check_vector_features(v, 'v', v.size(1) if v.dim() == 3 else -1)

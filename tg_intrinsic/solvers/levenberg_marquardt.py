@@ -38,7 +38,8 @@ def levenberg_marquardt(residual: Callable[[Tensor], Tensor], x0: Tensor,
                         damping: float = 1e-3, l1_epsilon: float = 1e-3,
                         jacobian: Optional[Callable] = None,
                         max_step: Optional[float] = None) -> tuple:
-    r"""Minimises, for every row :math:`n` independently,
+    r"""Minimises a weighted sum of losses of residuals within bounds, for
+    every row :math:`n` independently. The objective of row :math:`n` is
 
     .. math::
         E_n(x_n) = \sum_k w_{nk}\, \rho(r_{nk}(x_n)), \qquad
@@ -242,7 +243,7 @@ def levenberg_marquardt_tv(jacobian: Callable[[Tensor], tuple], x0: Tensor,
                            cg_iter: int = 50,
                            rows_per_call: Optional[int] = None) -> tuple:
     r"""Minimises the L1 fit of many small problems coupled by a total
-    variation over a graph,
+    variation over a graph. It minimises
 
     .. math::
         E(x) = \sum_n \sum_k w_{nk} |r_{nk}(x_n)|

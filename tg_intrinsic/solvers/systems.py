@@ -201,7 +201,7 @@ def smooth(data, alpha: Union[float, Tensor], y: Optional[Tensor] = None,
            split: Optional[bool] = None) -> Tensor:
     r"""Implicit smoothing of the signal :math:`y` (default ``data.x``,
     :math:`(N)` or :math:`(N, C)`) with Laplacian and, for
-    :math:`\beta > 0`, bi-Laplacian terms:
+    :math:`\beta > 0`, bi-Laplacian terms. It solves
 
     .. math::
         (M + \alpha S + \beta S M^{-1} S)\, x = M y,
@@ -364,7 +364,7 @@ def poisson(data, eta: float, y: Optional[Tensor] = None,
             lower_bound: int = 1000, cycle: str = 'V',
             max_iter: int = 100, method: str = 'cycles') -> Tensor:
     r"""The screened Poisson problem with right-hand side :math:`y`
-    (default ``data.x``, :math:`(N)` or :math:`(N, C)`):
+    (default ``data.x``, :math:`(N)` or :math:`(N, C)`). It solves
 
     .. math::
         (S + \eta M)\, x = M y,
@@ -430,7 +430,7 @@ def diffuse(stiffness: sp.spmatrix, mass, y: Tensor, time,
             cycle: str = 'V', max_iter: int = 100,
             method: str = 'cycles') -> Tensor:
     r"""One implicit step of the heat flow for every channel of
-    :math:`y`, each with its own time :math:`t_c \geq 0`:
+    :math:`y`, each with its own time :math:`t_c \geq 0`. It solves
 
     .. math::
         (M + t_c S)\, u_c = M y_c,
@@ -565,7 +565,8 @@ def conformal_flow(data, step: float, steps: int = 10,
     r"""Conformalized mean curvature flow of a mesh (Kazhdan, Solomon and
     Ben-Chen, 2012) by implicit steps: the stiffness matrix :math:`S_0` of
     the initial surface is kept and only the masses :math:`M_t` follow the
-    flow, so the flow stays regular where mean curvature flow pinches,
+    flow, so the flow stays regular where mean curvature flow pinches.
+    Each step solves
 
     .. math::
         (M_t + h\, S_0)\, p_{t+1} = M_t\, p_t .

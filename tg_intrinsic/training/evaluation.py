@@ -15,7 +15,7 @@ def instance_miou(pred: torch.Tensor, y: torch.Tensor,
     r"""Mean intersection over union of one shape's parts, as ShapeNet-Part
     is scored: over the parts :obj:`parts` (a boolean mask over labels) of
     its category, a part absent from both prediction and truth counting
-    as 1,
+    as 1. It computes
 
     .. math::
         \mathrm{mIoU} = \frac{1}{|P|} \sum_{p \in P}

@@ -15,7 +15,8 @@ from tg_intrinsic.transforms._mesh_ops import (DEGENERATE_TOLERANCE,
 @functional_transform('clean_mesh')
 class CleanMesh(GraphTransform):
     r"""Makes a raw scanned or exported mesh usable by the surface
-    transforms (functional name: :obj:`clean_mesh`), in this order:
+    transforms (functional name: :obj:`clean_mesh`). It runs these steps,
+    in this order:
 
     1. polygons (``face`` of shape :math:`(k, F)`, :math:`k > 3`, rows of
        -1 padding shorter ones) become triangle fans

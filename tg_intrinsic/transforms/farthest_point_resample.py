@@ -21,7 +21,7 @@ from tg_intrinsic.transforms._mesh_ops import (check_mesh_data, compact,
 class FarthestPointResample(GraphTransform):
     r"""Resamples a mesh to :obj:`num_vertices` vertices chosen by farthest
     point sampling and rebuilds a triangle mesh on them (functional name:
-    :obj:`farthest_point_resample`), as `"CNNs on Surfaces using
+    :obj:`farthest_point_resample`). This is how `"CNNs on Surfaces using
     Rotation-Equivariant Features" <https://doi.org/10.1145/3386569.3392437>`_
     (Harmonic Surface Networks) prepares scans for segmentation (1024
     vertices in the paper):

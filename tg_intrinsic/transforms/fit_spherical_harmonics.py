@@ -36,10 +36,10 @@ def _chunks(num: int, size: int):
 @functional_transform('fit_spherical_harmonics')
 class FitSphericalHarmonics(GraphTransform):
     r"""Fits spherical harmonics to the incoming and the observed outgoing
-    radiance of every point, in its local frame (Wiersma et al.,
-    "Uncertainty for SVBRDF Acquisition using Frequency Analysis",
-    SIGGRAPH 2025, eq. 5.12; functional name:
-    :obj:`fit_spherical_harmonics`).
+    radiance of every point, in its local frame (functional name:
+    :obj:`fit_spherical_harmonics`). It follows eq. 5.12 of Wiersma et al.,
+    "Uncertainty for SVBRDF Acquisition using Frequency Analysis"
+    (SIGGRAPH 2025).
 
     Coefficients solve, per point and channel,
 

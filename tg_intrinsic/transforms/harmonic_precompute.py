@@ -13,7 +13,7 @@ from tg_intrinsic.transforms._batching import GraphTransform
 class HarmonicPrecompute(GraphTransform):
     r"""Precomputes the parameter-free part of every circular-harmonic filter
     of Harmonic Surface Networks per edge, ring and order (functional name:
-    :obj:`harmonic_precompute`):
+    :obj:`harmonic_precompute`). It computes
 
     .. math::
         h_{(j \to i), q, m} = \frac{w_j}{\sum_{k \in \mathcal{N}(i)} w_k}

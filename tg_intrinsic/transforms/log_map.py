@@ -19,7 +19,7 @@ from tg_intrinsic.transforms._batching import GraphTransform
 class LogMap(GraphTransform):
     r"""Builds geodesic discs and the log map of every neighbour in the
     tangent frame of its centre, for Harmonic Surface Networks (functional
-    name: :obj:`log_map`):
+    name: :obj:`log_map`). It computes
 
     .. math::
         \mathcal{N}(i) = \{j : d(p_i, p_j) < \epsilon\}, \qquad

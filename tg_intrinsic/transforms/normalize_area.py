@@ -8,7 +8,7 @@ from tg_intrinsic.transforms._batching import GraphTransform
 @functional_transform('normalize_area')
 class NormalizeArea(GraphTransform):
     r"""Centres a mesh at its area-weighted centroid and scales it to a
-    given surface area (functional name: :obj:`normalize_area`),
+    given surface area (functional name: :obj:`normalize_area`). It maps
 
     .. math::
         p_i \leftarrow \sqrt{A^* / A}\, (p_i - c),

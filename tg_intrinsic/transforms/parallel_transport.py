@@ -11,7 +11,7 @@ from tg_intrinsic.transforms._batching import GraphTransform
 @functional_transform('parallel_transport')
 class ParallelTransport(GraphTransform):
     r"""Writes the parallel-transport angle of every edge of the disc graph
-    (functional name: :obj:`parallel_transport`): transporting
+    (functional name: :obj:`parallel_transport`). Transporting
     :math:`e_u(j)` along the shortest geodesic from :math:`p_j` to
     :math:`p_i` gives
 

@@ -14,7 +14,7 @@ OPERATOR_KEYS = ('edge_index', 'frame', 'grad_weight', 'div_weight')
 class RandomAxisScale(GraphTransform):
     r"""Scales a shape by an independent random factor along every axis,
     as DeltaConv's ModelNet40 and human-body augmentation does (functional
-    name: :obj:`random_axis_scale`):
+    name: :obj:`random_axis_scale`). It maps
 
     .. math::
         \mathbf{p}_i \mapsto S\,\mathbf{p}_i, \quad

@@ -14,8 +14,8 @@ _LEVEL_POS = re.compile(r'pos_[1-9][0-9]*')
 
 @functional_transform('random_translation')
 class RandomTranslation(GraphTransform):
-    r"""Moves a whole shape by one random offset (functional name:
-    :obj:`random_translation`), uniform in a cube; unlike PyG's
+    r"""Moves a whole shape by one random offset, uniform in a cube
+    (functional name: :obj:`random_translation`). Unlike PyG's
     :class:`~torch_geometric.transforms.RandomJitter`, which moves every
     point on its own, the shape and everything intrinsic to it (normals,
     frames, operators) stay as they are; the points of coarser levels

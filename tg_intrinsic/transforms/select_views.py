@@ -142,9 +142,9 @@ class SelectViews(GraphTransform):
     r"""Keeps the :obj:`num_views` views that are expected to lower the
     spectral uncertainty the most, chosen greedily from :obj:`seed_views`
     by :func:`~tg_intrinsic.geometry.appearance.view_selection.select_views`
-    (Wiersma et al., "Uncertainty for SVBRDF Acquisition using Frequency
-    Analysis", SIGGRAPH 2025, Fig. 5.8; functional name:
-    :obj:`select_views`):
+    (functional name: :obj:`select_views`). It follows Fig. 5.8 of
+    Wiersma et al., "Uncertainty for SVBRDF Acquisition using Frequency
+    Analysis" (SIGGRAPH 2025), choosing
 
     .. math::
         v^* = \operatorname*{arg\,max}_{v} \sum_{i\,:\,w_{iv} > 0}

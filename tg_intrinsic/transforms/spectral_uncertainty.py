@@ -14,9 +14,9 @@ from tg_intrinsic.transforms._batching import GraphTransform
 @functional_transform('spectral_uncertainty')
 class SpectralUncertainty(GraphTransform):
     r"""Per-point uncertainty of the specular parameters from power spectra
-    (Wiersma et al., "Uncertainty for SVBRDF Acquisition using Frequency
-    Analysis", SIGGRAPH 2025, eqs. 5.19-5.25; functional name:
-    :obj:`spectral_uncertainty`).
+    (functional name: :obj:`spectral_uncertainty`). It follows eqs.
+    5.19-5.25 of Wiersma et al., "Uncertainty for SVBRDF Acquisition using
+    Frequency Analysis" (SIGGRAPH 2025).
 
     A grid over :math:`(K_s, r)` (roughness :math:`r`, :math:`\alpha = r^2`)
     scores

@@ -137,7 +137,7 @@ def look_at_cameras(positions: Tensor, target=(0.0, 0.0, 0.0),
                     up=(0.0, 0.0, 1.0)):
     r"""Pinhole cameras at :obj:`positions` looking at :obj:`target`,
     OpenCV style (:math:`z_c` forward, :math:`x_c` right, :math:`y_c` down
-    in the image, world :math:`z` up on screen):
+    in the image, world :math:`z` up on screen). Their poses are
 
     .. math::
         z_c = \frac{\mathbf{t} - \mathbf{c}}{\|\mathbf{t} - \mathbf{c}\|},

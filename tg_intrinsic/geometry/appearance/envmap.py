@@ -266,7 +266,7 @@ def _row_chunk(num_coefficients: int, channels: int) -> int:
 
 def envmap_to_sh(envmap: Tensor, l_max: int) -> Tensor:
     r"""Spherical-harmonic coefficients of an environment map by pixel
-    quadrature,
+    quadrature. They are
 
     .. math::
         c_{lm} = \sum_{\text{pixels } p} L_p\, Y_{lm}(\omega_p)\,
@@ -334,7 +334,7 @@ def _to_sh(envmap: Tensor, l_max: int, fejer: bool = False) -> Tensor:
 
 def sh_to_envmap(coefficients: Tensor, height: int, width: int) -> Tensor:
     r"""Evaluates a spherical-harmonic expansion at the pixel centres of an
-    :math:`H \times W` equirectangular grid,
+    :math:`H \times W` equirectangular grid. It computes
 
     .. math::
         L(\omega_p) = \sum_{l \le l^*} \sum_{m=-l}^{l} c_{lm}\,
@@ -517,7 +517,8 @@ def _pixel_moments(height: int, width: int, dtype, device) -> Tensor:
 
 def irradiance(envmap: Tensor, normals: Tensor,
                resolution: int = 32) -> Tensor:
-    r"""Irradiance of an environment map on surfaces with the given normals,
+    r"""Irradiance of an environment map on surfaces with the given normals.
+    It is computed as
 
     .. math::
         E(n) = \int_{S^2} L(\omega) \max(0, n \cdot \omega)\, d\omega

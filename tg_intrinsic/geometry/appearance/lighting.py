@@ -426,7 +426,8 @@ def render_radiance(normal: Tensor, base_color: Tensor, metallic: Tensor,
                     irradiance_table: bool = False):
     r"""Outgoing radiance of surface points with principled materials under
     a distant environment map, by an independent estimate of the full
-    reflection integral (see the module docstring for :math:`f_r`):
+    reflection integral (see the module docstring for :math:`f_r`). It
+    estimates
 
     .. math::
         B(\omega_o) = \frac{K_d}{\pi} \sum_p L_p \Omega_p

@@ -356,7 +356,7 @@ def rasterize(vertices: Tensor, faces: Tensor, intrinsics: Tensor,
               extrinsics: Tensor, height: int, width: int,
               near: float = 1e-6):
     r"""Z-buffer rasterisation of a triangle mesh by one pinhole camera,
-    sampled at pixel centres: pixel :math:`(i, j)` shows the nearest
+    sampled at pixel centres. Pixel :math:`(i, j)` shows the nearest
     triangle hit by the ray through :math:`(u, v) = (j + \frac12, i +
     \frac12)`, i.e. through :math:`\mathbf{d} = K^{-1}(u, v, 1)^\top`.
 

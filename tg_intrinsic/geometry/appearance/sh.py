@@ -106,7 +106,7 @@ def fibonacci_sphere(n: int, dtype=torch.float64, device=None) -> Tensor:
 def fit_sh(directions: Tensor, values: Tensor, l_max: int,
            weights: Tensor = None, regularizer: float = 1e-4) -> Tensor:
     r"""Regularised least-squares spherical-harmonic coefficients of sparse
-    samples, batched over leading dimensions,
+    samples, batched over leading dimensions. They solve
 
     .. math::
         (Y^\top W Y + \lambda\,\operatorname{diag}(e^{l}))\,c = Y^\top W f,
@@ -202,7 +202,7 @@ def schlick_fresnel(cos_theta: Tensor, r0: Tensor) -> Tensor:
 
 
 def smith_g1(cos_theta: Tensor, alpha: Tensor) -> Tensor:
-    r"""Smith's GGX shadowing-masking term for one direction,
+    r"""Smith's GGX shadowing-masking term for one direction. It is
 
     .. math::
         G_1 = \frac{2 \cos\theta}{\cos\theta + \sqrt{\alpha^2 + (1 -

@@ -137,8 +137,8 @@ def select_views(mirror_dir: Tensor, weight: Tensor, light: Tensor,
                  regularizer: float = 1e-4, prefilter_alpha: float = 0.0,
                  grid=(32, 32), sigma: float = 1e-2,
                  chunk_size: int = 2048) -> Tuple[Tensor, Tensor]:
-    r"""Greedy next-view selection by expected entropy reduction: from the
-    :obj:`seed_views`, adds one candidate at a time, the one whose
+    r"""Greedy next-view selection by expected entropy reduction. From the
+    :obj:`seed_views`, it adds one candidate at a time, the one whose
     *predicted* observations lower the mean normalised entropy of
     :func:`~tg_intrinsic.geometry.appearance.brdf.spectral_uncertainty`
     the most,

@@ -66,7 +66,7 @@ def harmonic_terms(edge_index: Tensor, logmap: Tensor, weight: Tensor,
                    radius: float, rings: int, max_order: int,
                    num_nodes: Optional[int] = None) -> Tensor:
     r"""The precomputed part of every circular-harmonic filter, per edge,
-    ring and order :math:`m = 0, \dots, \text{max\_order}`:
+    ring and order :math:`m = 0, \dots, \text{max\_order}`.
 
     .. math::
         h_{e, q, m} = \frac{w_j}{\sum_{k \in \mathcal{N}(i)} w_k}\,

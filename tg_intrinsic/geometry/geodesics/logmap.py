@@ -293,7 +293,7 @@ def hsn_bytes_per_edge(dtype: torch.dtype = torch.float32, rings: int = 6,
                        ) -> float:
     r"""Bytes that the Harmonic Surface Network precomputation
     (:func:`tg_intrinsic.train.hsn_pipeline`) keeps per edge of the
-    level-0 disc graph,
+    level-0 disc graph. They are
 
     .. math::
         b = \Big(\underbrace{16}_{\texttt{edge\_index}}
@@ -370,7 +370,7 @@ def estimate_disc_edges(pos: Tensor, eps: float,
                         max_neighbors: Optional[int] = None,
                         num_samples: int = 64, seed: int = 0) -> int:
     r"""Estimates the number of edges :math:`E` of the disc graph of
-    :func:`geodesic_neighbourhoods` without building it, from the disc
+    :func:`geodesic_neighbourhoods` without building it. It uses the disc
     sizes of a random sample :math:`S` of the centres :math:`C`:
 
     .. math::
@@ -517,8 +517,9 @@ def geodesic_neighbourhoods(pos: Tensor, eps: float,
                             max_memory: Optional[float] = MAX_DISC_MEMORY,
                             bytes_per_edge: Optional[float] = None
                             ) -> Tuple[Tensor, Tensor]:
-    r"""Builds the geodesic disc graph: every pair :math:`(j \to i)` whose
-    geodesic distance is below :math:`\varepsilon`, self-loops included,
+    r"""Builds the geodesic disc graph, self-loops included. It holds every
+    pair :math:`(j \to i)` whose geodesic distance is below
+    :math:`\varepsilon`,
 
     .. math::
         \mathcal{N}(i) = \{ j : d(p_i, p_j) < \varepsilon \}.
@@ -666,7 +667,8 @@ def log_map(pos: Tensor, edge_index: Tensor, frame: Optional[Tensor] = None,
             margin: float = 8.0, workers: Optional[int] = None
             ) -> Tuple[Tensor, Tensor, Tensor]:
     r"""Log map in polar form and parallel-transport angle for every edge
-    :math:`(j \to i)`, in the tangent frame of the centre :math:`i`:
+    :math:`(j \to i)`, in the tangent frame of the centre :math:`i`. They
+    satisfy
 
     .. math::
         \log_i(p_j) = r_{ij} \left(\cos\theta_{ij} \, e_u(i)
@@ -835,7 +837,7 @@ def vertex_area_weights(pos: Tensor, face: Optional[Tensor] = None,
                         normal: Optional[Tensor] = None, k: int = 8
                         ) -> Tensor:
     r"""Area :math:`A_j` of the surface around every point, the integration
-    weight of a neighbour in a discretised surface integral,
+    weight of a neighbour in a discretised surface integral. That is,
 
     .. math::
         \int_{B_\varepsilon(i)} f \, dA \approx \sum_{j \in \mathcal{N}(i)}

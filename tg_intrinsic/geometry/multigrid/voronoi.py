@@ -15,7 +15,8 @@ from ..jit import jit
 def graph_voronoi(pos: Tensor, edge_index: Tensor, seeds: Tensor,
                   edge_length: Optional[Tensor] = None
                   ) -> Tuple[Tensor, Tensor]:
-    r"""Assigns every point to the seed at the smallest graph distance,
+    r"""Assigns every point to the seed at the smallest graph distance. It
+    computes
 
     .. math::
         c(i) = \operatorname*{arg\,min}_{s \in S} d_G(i, s),

@@ -68,7 +68,7 @@ def perona_malik(pos: Tensor, signal: Tensor, steps: int = 20,
                  operators: Optional[SurfaceOperators] = None) -> Tensor:
     r"""Anisotropic diffusion of Perona and Malik ("Scale-space and edge
     detection using anisotropic diffusion", 1990) of a signal on a point
-    cloud, by explicit steps
+    cloud, by explicit steps. Each step is
 
     .. math::
         u^{t+1} = u^t + \delta t\, \operatorname{div}\big(

@@ -15,10 +15,10 @@ from .neighbors import knn
 def estimate_normals(pos: Tensor, k: int = 10,
                      batch: Optional[Tensor] = None,
                      orient: bool = True) -> Tensor:
-    r"""Estimates unit normals of a point cloud by local PCA (Hoppe et al.,
-    1992): the normal of point :math:`i` is the eigenvector of the smallest
-    eigenvalue of the covariance of :math:`i` and its :math:`k` nearest
-    neighbours :math:`\mathcal{N}(i)`,
+    r"""Estimates unit normals of a point cloud by local PCA. As in Hoppe
+    et al. (1992), the normal of point :math:`i` is the eigenvector of the
+    smallest eigenvalue of the covariance of :math:`i` and its :math:`k`
+    nearest neighbours :math:`\mathcal{N}(i)`,
 
     .. math::
         C_i = \frac{1}{k + 1} \sum_{j \in \{i\} \cup \mathcal{N}(i)}

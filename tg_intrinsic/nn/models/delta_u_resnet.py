@@ -83,10 +83,10 @@ class _ResNetBlock(torch.nn.Module):
 
 
 class DeltaUResNet(torch.nn.Module):
-    r"""The Delta-U-ResNet for per-point segmentation, from the DeltaConv
-    thesis of R. Wiersma (appendix A.2: the `"DeltaConv"
-    <https://arxiv.org/abs/2111.08799>`_ operators in the U-ResNet of
-    KPFCNN, Thomas et al., ICCV 2019).
+    r"""The Delta-U-ResNet for per-point segmentation from the DeltaConv
+    thesis by Wiersma: the `"DeltaConv" <https://arxiv.org/abs/2111.08799>`_
+    operators in the U-ResNet of KPFCNN. The network is in appendix A.2 of
+    the thesis; KPFCNN is by Thomas et al. (ICCV 2019).
 
     Four encoder scales with two bottleneck ResNet blocks each, whose
     middle layer is a :class:`DeltaConv`; every scale keeps a quarter of
@@ -195,6 +195,22 @@ class DeltaUResNet(torch.nn.Module):
                 module.reset_parameters()
 
     def forward(self, data: Data) -> Tensor:
+        r"""Classifies every point of a (batched) point cloud.
+
+        Args:
+            data (torch_geometric.data.Data): The points, with ``pos``
+                :math:`(N, 3)`, optionally ``x`` :math:`(N, C_{in})` (the
+                input scalars, ``pos`` otherwise) and ``batch`` :math:`(N)`,
+                and the three levels of
+                :class:`~tg_intrinsic.transforms.PoolingLevels` built with
+                :obj:`method=pooling` (their DeltaConv operators and pooling
+                edges); with :obj:`num_categories`, also ``category``
+                (one-hot :math:`(B, \text{num\_categories})` or indices
+                :math:`(B)`).
+
+        Returns:
+            torch.Tensor: Logits :math:`(N, C)`, one row per point.
+        """
         x = self._input(data)
         levels = self._levels(data)
         v = levels[0].operators.grad(x)

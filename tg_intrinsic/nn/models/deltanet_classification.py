@@ -19,7 +19,7 @@ class DeltaNetClassification(torch.nn.Module):
     <https://arxiv.org/abs/2111.08799>`_ paper: :class:`DeltaConv` layers in
     DGCNN's layout (static k-nn graph), the concatenated layer outputs
     embedded to 1024 channels, global max and mean pooling, and an MLP head
-    (2048 - 512 - 256 - :math:`C`, dropout 0.5):
+    (2048 - 512 - 256 - :math:`C`, dropout 0.5). It computes
 
     .. math::
         \hat{y} = \mathrm{MLP}\Big(\big[\max_i \mathbf{e}_i \,\|\,
@@ -86,6 +86,19 @@ class DeltaNetClassification(torch.nn.Module):
                 module.reset_parameters()
 
     def forward(self, data: Data) -> Tensor:
+        r"""Classifies every example of a (batched) point cloud.
+
+        Args:
+            data (torch_geometric.data.Data): The points, with ``pos``
+                :math:`(N, 3)` and optionally ``x`` (the input scalars,
+                ``pos`` otherwise), ``normal`` or ``frame`` (the tangent
+                frames, estimated otherwise), ``batch`` :math:`(N)`, and the
+                operators of :class:`~tg_intrinsic.transforms.MLSOperators`
+                (built here otherwise).
+
+        Returns:
+            torch.Tensor: Logits :math:`(B, C)`, one row per example.
+        """
         x = torch.cat(self.base(data), dim=1)
         batch, size = graph_batch(data, x)
         count = x.size(0) // size

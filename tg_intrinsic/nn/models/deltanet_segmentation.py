@@ -18,7 +18,7 @@ class DeltaNetSegmentation(torch.nn.Module):
     (MLP depth 2), a global max-pooled embedding broadcast back to every
     point, optionally an embedding of the object category (``data.category``,
     one-hot, as is usual for ShapeNet parts), and a per-point head
-    (256 - 256 - 128 - :math:`C`, dropout 0.5):
+    (256 - 256 - 128 - :math:`C`, dropout 0.5). It computes
 
     .. math::
         \hat{y}_i = \mathrm{MLP}\big([\max_{i'} \mathbf{e}_{i'} \,\|\,
@@ -93,6 +93,20 @@ class DeltaNetSegmentation(torch.nn.Module):
                 module.reset_parameters()
 
     def forward(self, data: Data) -> Tensor:
+        r"""Classifies every point of a (batched) point cloud.
+
+        Args:
+            data (torch_geometric.data.Data): The points, as for
+                :class:`DeltaNetClassification`: ``pos`` :math:`(N, 3)` and
+                optionally ``x``, ``normal`` or ``frame``, ``batch``
+                :math:`(N)` and the operators of
+                :class:`~tg_intrinsic.transforms.MLSOperators`; with
+                :obj:`num_categories`, also ``category`` (one-hot
+                :math:`(B, \text{num\_categories})` or indices :math:`(B)`).
+
+        Returns:
+            torch.Tensor: Logits :math:`(N, C)`, one row per point.
+        """
         conv_out = self.base(data)
         x = self.embedding(torch.cat(conv_out, dim=1))
         batch, size = graph_batch(data, x)

@@ -74,6 +74,17 @@ class HSNClassification(HSNBase):
             module.reset_parameters()
 
     def forward(self, data: Data) -> Tensor:
+        r"""Classifies every shape of a (batched) data object.
+
+        Args:
+            data (torch_geometric.data.Data): The shapes, with ``x``
+                :math:`(N, C_{in})` (else ``pos``), optionally ``batch``
+                :math:`(N)`, and the disc graphs of levels 0 and 1 and the
+                pooling between them (see above).
+
+        Returns:
+            torch.Tensor: Logits :math:`(B, C)`, one row per shape.
+        """
         x = input_features(data, self.in_channels)
         o = self.max_order + 1
         (fine, coarse), shapes = prepare_levels(data, x, [[(1, o), (o, o)],

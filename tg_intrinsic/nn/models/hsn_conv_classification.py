@@ -127,8 +127,21 @@ class HSNConvClassification(torch.nn.Module):
 
     def forward(self, data: Data,
                 operators: Optional[List[dict]] = None) -> Tensor:
-        """Logits of every example of ``data``; ``operators`` from
-        :meth:`operators` skips building them again."""
+        r"""Classifies every example of a (batched) data object.
+
+        Args:
+            data (torch_geometric.data.Data): The examples, with ``x``
+                :math:`(N, C_{in})` (else ``pos``), optionally ``batch``
+                :math:`(N)`, and the disc graphs of levels :math:`0 .. L`
+                and the pooling between them (see above).
+            operators (List[dict], optional): The harmonic operators of
+                every level, from :meth:`operators`, for batches that share
+                their meshes and precomputation; :obj:`None` builds them
+                from :obj:`data`. (default: :obj:`None`)
+
+        Returns:
+            torch.Tensor: Logits :math:`(B, C)`, one row per example.
+        """
         z = input_features(data, self.in_channels)
         o = self.max_order + 1
         levels, shapes = prepare_levels(data, z, self._pairs(), operators)

@@ -17,7 +17,7 @@ class HSNCorrespondence(torch.nn.Module):
     <https://doi.org/10.1145/3386569.3392437>`_ paper (its FAUST
     experiment): an :class:`HSNUResNet` whose gauge-invariant features of
     every vertex go through two fully connected layers that classify the
-    vertex as one of the :math:`T` vertices of a template,
+    vertex as one of the :math:`T` vertices of a template. It computes
 
     .. math::
         \hat{\mathbf{y}}_i = W_2\, \mathrm{dropout}\big(\mathrm{ReLU}(
@@ -71,6 +71,17 @@ class HSNCorrespondence(torch.nn.Module):
         self.lin2.reset_parameters()
 
     def forward(self, data: Data) -> Tensor:
+        r"""Scores every vertex against every template vertex.
+
+        Args:
+            data (torch_geometric.data.Data): The shapes, as for
+                :class:`HSNUResNet`: ``x`` :math:`(N, C_{in})` (else
+                ``pos``), optionally ``batch`` :math:`(N)`, and the disc
+                graphs of every level and the pooling between them.
+
+        Returns:
+            torch.Tensor: Logits :math:`(N, T)`, one row per vertex.
+        """
         h = F.relu(self.lin1(self.backbone(data)))
         h = F.dropout(h, p=self.dropout, training=self.training)
         return self.lin2(h)

@@ -20,7 +20,7 @@ class HSNSegmentation(HSNBase):
     of :class:`HarmonicResNetBlock` (two per level and in the decoder),
     parallel-transport pooling and unpooling, a skip connection by
     concatenation, and a last :class:`HarmonicConv` whose stream magnitudes
-    are the (gauge-invariant) logits:
+    are the (gauge-invariant) logits. It computes
 
     .. math::
         \hat{y}_i = \sum_M \big| \mathrm{conv}\big(\mathrm{dec}\big(
@@ -76,6 +76,17 @@ class HSNSegmentation(HSNBase):
             module.reset_parameters()
 
     def forward(self, data: Data) -> Tensor:
+        r"""Classifies every vertex of a (batched) data object.
+
+        Args:
+            data (torch_geometric.data.Data): The shapes, as for
+                :class:`HSNClassification`: ``x`` :math:`(N, C_{in})` (else
+                ``pos``), optionally ``batch`` :math:`(N)`, and the disc
+                graphs of levels 0 and 1 and the pooling between them.
+
+        Returns:
+            torch.Tensor: Logits :math:`(N, C)`, one row per vertex.
+        """
         x = input_features(data, self.in_channels)
         o = self.max_order + 1
         (fine, level1), shapes = prepare_levels(data, x, [[(1, o), (o, o)],

@@ -20,10 +20,11 @@ from tg_intrinsic.pool import ParallelTransportPool, ParallelTransportUnpool
 class HSNUResNet(torch.nn.Module):
     r"""The U-ResNet of Harmonic Surface Networks, from the `"CNNs on
     Surfaces using Rotation-Equivariant Features"
-    <https://doi.org/10.1145/3386569.3392437>`_ paper (its segmentation
-    and correspondence network, Fig. 2.6 of the thesis): stacks of
+    <https://doi.org/10.1145/3386569.3392437>`_ paper: stacks of
     :class:`HarmonicResNetBlock` in a U-Net with parallel-transport
-    pooling and unpooling and skip connections by concatenation.
+    pooling and unpooling and skip connections by concatenation. It is the
+    paper's segmentation and correspondence network (Fig. 2.6 of the
+    thesis).
 
     With :math:`L` levels (``len(channels)``), an encoder stack runs on
     every level :math:`0, \dots, L - 1` (pooling between them), one more
@@ -134,6 +135,19 @@ class HSNUResNet(torch.nn.Module):
             torch.nn.init.zeros_(self.bias)
 
     def forward(self, data: Data) -> Tensor:
+        r"""Computes the per-vertex outputs of a (batched) data object.
+
+        Args:
+            data (torch_geometric.data.Data): The shapes, with ``x``
+                :math:`(N, C_{in})` (else ``pos``), optionally ``batch``
+                :math:`(N)`, and the disc graphs of levels
+                :math:`0, \dots, L - 1` and the pooling between them (see
+                above).
+
+        Returns:
+            torch.Tensor: Outputs :math:`(N, C)`, or invariant features
+            :math:`(N, \text{channels}[0])` with ``out_channels=None``.
+        """
         x = input_features(data, self.in_channels)
         o = self.max_order + 1
         levels, shapes = prepare_levels(

@@ -41,6 +41,7 @@ demo: $(STAMP)
 docs: $(STAMP)
 	$(BIN)/pip install -q -e ".[docs]"
 	$(BIN)/python -m sphinx -W --keep-going -b html docs docs/_build/html
+	$(BIN)/python docs/check_site.py docs/_build/html
 
 train: $(STAMP)
 	$(BIN)/tg-intrinsic train $(ARGS)
@@ -63,4 +64,4 @@ gravomg-env:
 	.gravomg-env/bin/pip install "numpy==1.26.4" "scipy<1.14" "gravomg==0.0.4"
 
 clean:
-	rm -rf $(VENV) build *.egg-info data docs/_build docs/api/pages docs/auto_examples
+	rm -rf $(VENV) build *.egg-info data docs/_build docs/api/pages docs/results/pages docs/results/summary.md docs/auto_examples

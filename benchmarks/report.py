@@ -21,13 +21,13 @@ import glob
 import json
 import os
 import sys
-from typing import Dict
+from typing import Dict, List, Tuple
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from report_rows import ORDER, ROWS, UNVERIFIED, ReportError  # noqa: E402
 # the number formats, which the tests check through this module
-from report_rows.common import (ROOT, pct, sci,  # noqa: E402,F401
+from report_rows.common import (ROOT, Row, pct, sci,  # noqa: E402,F401
                                 seconds, sig, span_pct, span_times,
                                 strip_ext, thousands, times)
 from report_rows.deltaconv import test_set_size  # noqa: E402,F401
@@ -50,8 +50,9 @@ def load_results(directory: str) -> Dict[str, dict]:
     return results
 
 
-def build_table(directory: str = RESULTS) -> str:
-    """The Markdown table from the JSONs in ``directory``."""
+def table_rows(directory: str = RESULTS) -> List[Tuple[str, Row]]:
+    """Every row of the table from the JSONs in ``directory``, in order,
+    each with the name of the benchmark (its JSON) it comes from."""
     results = load_results(directory)
     unknown = sorted(set(results) - set(ROWS))
     if unknown:
@@ -67,7 +68,7 @@ def build_table(directory: str = RESULTS) -> str:
     if sorted(ORDER) != sorted(ROWS):
         raise ReportError("report_rows.ORDER and the registered row "
                           "functions differ: list every row function once")
-    lines = [HEADER]
+    found = []
     for name in ORDER:
         function = ROWS[name]
         try:
@@ -78,13 +79,20 @@ def build_table(directory: str = RESULTS) -> str:
             raise ReportError(f"{name}.json does not have what its row "
                               f"needs: {type(error).__name__}: {error}"
                               ) from error
-        for claim, script, result in rows:
-            cells = [claim, f'`{script}`', result]
-            for cell in cells:
+        for row in rows:
+            for cell in row:
                 if '|' in cell or '\n' in cell:
                     raise ReportError(f"a cell of {name} holds '|' or a "
                                       f"line break: {cell[:80]!r}")
-            lines.append('| ' + ' | '.join(cells) + ' |')
+            found.append((name, tuple(row)))
+    return found
+
+
+def build_table(directory: str = RESULTS) -> str:
+    """The Markdown table from the JSONs in ``directory``."""
+    lines = [HEADER]
+    for _, (claim, script, result) in table_rows(directory):
+        lines.append(f'| {claim} | `{script}` | {result} |')
     return '\n'.join(lines)
 
 

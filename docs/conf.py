@@ -35,20 +35,26 @@ extensions = [
     'sphinx.ext.autosummary',
     'sphinx.ext.napoleon',
     'sphinx.ext.mathjax',
+    # MathJax served from the build, not a CDN: maths shows offline
+    'sphinx-mathjax-offline',
     'sphinx.ext.viewcode',
     'myst_parser',
     'sphinx_gallery.gen_gallery',
 ]
 source_suffix = {'.rst': 'restructuredtext', '.md': 'markdown'}
-exclude_patterns = ['_build', 'auto_examples/*.ipynb', 'auto_examples/*.py',
+exclude_patterns = ['_build', 'results/summary.md',
+                    'auto_examples/*.ipynb', 'auto_examples/*.py',
                     'auto_examples/*.zip', 'auto_examples/*.json',
                     'auto_examples/*.md5', 'sg_execution_times.rst',
                     'auto_examples/sg_execution_times.rst']
 html_theme = 'furo'
+# smart quotes, but '--' stays '--' (as a dash it breaks a pasted command)
+smartquotes_action = 'qe'
 html_title = f'tg_intrinsic {release}'
 myst_heading_anchors = 3
 myst_enable_extensions = ['dollarmath']
 
+templates_path = ['_templates']  # class pages: the class's own members only
 autosummary_generate = True
 autodoc_default_options = {'members': True, 'show-inheritance': True}
 autodoc_member_order = 'bysource'
@@ -112,6 +118,10 @@ def link_external(app, env, node, contnode):
 
 
 # -- the API reference, one page per entry of API_PAGES ---------------------
+#: public name -> the full name its API entry has
+DOCUMENTED = {}
+
+
 def write_api_pages():
     """``api/<page>.rst`` with an autosummary table per module, each name
     under the first module of the page that lists it."""
@@ -130,6 +140,8 @@ def write_api_pages():
             if not names:
                 continue
             shown.update(names)
+            DOCUMENTED.update((n, f'{module_name}.{n}') for n in names
+                              if n not in DOCUMENTED)
             lines += [f'``{module_name}``', '-' * (len(module_name) + 4), '',
                       f'.. automodule:: {module_name}', '   :no-members:',
                       '', f'.. currentmodule:: {module_name}', '']
@@ -146,5 +158,115 @@ def write_api_pages():
 write_api_pages()
 
 
+# -- the results: a short table and a page per benchmark ---------------------
+RESULTS = os.path.join(ROOT, 'benchmarks', 'results')
+
+
+def headline(result: str, limit: int = 160) -> str:
+    """A result's first clause (to its first ';' or sentence end), at most
+    ``limit`` characters, cut between words."""
+    import re
+    first = re.split(r'; |\. (?=[A-Z])', result, maxsplit=1)[0]
+    if len(first) > limit:
+        first = first[:limit].rsplit(' ', 1)[0] + ' ...'
+    return first
+
+
+def write_results_pages():
+    """``results/pages/<benchmark>.md``: the rows of README's results table
+    that a benchmark's JSON gives, its figure (read from
+    ``benchmarks/results/`` at build time) and how to rerun it; and
+    ``results/summary.md``, one line per claim, which the Results page
+    includes."""
+    sys.path.insert(0, os.path.join(ROOT, 'benchmarks'))
+    try:
+        from report import table_rows
+    finally:
+        sys.path.pop(0)
+    folder = os.path.join(DOCS, 'results', 'pages')
+    os.makedirs(folder, exist_ok=True)
+    pages, summary = {}, ['| claim | headline | details |', '|---|---|---|']
+    for name, (claim, script, result) in table_rows(RESULTS):
+        pages.setdefault(name, (script, []))[1].append((claim, result))
+        summary.append(f'| {claim} | {headline(result)} | '
+                       f'{{doc}}`{name} <pages/{name}>` |')
+    texts = {os.path.join('..', 'summary.md'): '\n'.join(summary) + '\n'}
+    for name, (script, rows) in pages.items():
+        lines = [f'# {rows[0][0]}', '']
+        for claim, result in rows:
+            if len(rows) > 1:
+                lines += [f'**{claim}**', '']
+            lines += [result, '']
+        figure = os.path.join(RESULTS, f'{name}.png')
+        if os.path.exists(figure):
+            lines += [f'```{{image}} ../../../benchmarks/results/{name}.png',
+                      f':alt: {name}', '```', '']
+        lines += [f'Rerun with `python benchmarks/{script}` (it writes '
+                  f'`benchmarks/results/{name}.json` and the figure).', '']
+        texts[f'{name}.md'] = '\n'.join(lines)
+    for file, text in texts.items():
+        path = os.path.join(folder, file)
+        if not os.path.exists(path) or open(path).read() != text:
+            with open(path, 'w') as f:
+                f.write(text)
+
+
+write_results_pages()
+
+
+def link_public_names(app, doctree):
+    """Inline code on the guide's pages that is a public name (``DeltaConv``,
+    ``recover()``) links to the name's API entry."""
+    from sphinx.addnodes import pending_xref
+    if app.env.docname.startswith('api/'):
+        return
+    for node in list(doctree.findall(nodes.literal)):
+        if isinstance(node.parent, (nodes.reference, pending_xref)):
+            continue
+        text = node.astext()
+        target = DOCUMENTED.get(text[:-2] if text.endswith('()') else text)
+        if target is None:
+            continue
+        reference = pending_xref('', refdomain='py', reftype='obj',
+                                 reftarget=target, refexplicit=True,
+                                 refwarn=False)
+        node.replace_self(reference)
+        reference += node
+
+
+def fix_source_backlinks(app, exception):
+    """viewcode's "[docs]" links on the source pages take one module name
+    per source file, so an object documented under another path (a name
+    exported by its package beside one exported by the file itself) gets
+    an anchor its page does not have; each such link is pointed at the id
+    of that name on its page."""
+    import re
+    if exception is not None or app.builder.format != 'html':
+        return
+    out = app.outdir
+    link = re.compile(r'(<a class="viewcode-back" href=")([^"#]+)#([^"]+)"')
+    for folder, _, files in os.walk(os.path.join(out, '_modules')):
+        for file in files:
+            path = os.path.join(folder, file)
+            text = open(path, encoding='utf-8').read()
+
+            def fixed(match):
+                target = os.path.normpath(os.path.join(folder, match[2]))
+                page = open(target, encoding='utf-8').read() \
+                    if os.path.exists(target) else ''
+                if f'id="{match[3]}"' in page:
+                    return match[0]
+                name = match[3].rsplit('.', 1)[-1]
+                ids = re.findall(rf'id="([\w.]+\.{re.escape(name)})"', page)
+                return f'{match[1]}{match[2]}#{ids[0]}"' if ids \
+                    else match[0]
+            new = link.sub(fixed, text)
+            if new != text:
+                with open(path, 'w', encoding='utf-8') as f:
+                    f.write(new)
+
+
 def setup(app):
     app.connect('missing-reference', link_external)
+    app.connect('doctree-read', link_public_names)
+    app.connect('build-finished', fix_source_backlinks)

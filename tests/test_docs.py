@@ -2,7 +2,11 @@
 ``__all__``) has a section in ``docs/api_pages.py``, and every public name
 has a docstring of its own (a constant: a ``#:`` comment where it is
 defined), so that the generated pages are never empty. The site itself is
-built by ``make docs`` (warnings are errors), a step of ``.ci/run``."""
+built by ``make docs`` (warnings are errors), a step of ``.ci/run``, which
+then runs ``docs/check_site.py`` on it (nothing loaded from another host,
+every link inside the site reaching its page and anchor, no typographic
+dash where a command's ``--`` belongs); its checks are tested here on
+pages written to fail them."""
 import importlib
 import inspect
 import os
@@ -86,3 +90,53 @@ def test_the_version_is_defined_once():
     with pytest.raises(SystemExit) as exit_info:
         build_parser().parse_args(['--version'])
     assert exit_info.value.code == 0
+
+
+def check_site():
+    sys.path.insert(0, DOCS)
+    try:
+        return importlib.import_module('check_site')
+    finally:
+        sys.path.remove(DOCS)
+
+
+def write_site(root, pages):
+    for name, body in pages.items():
+        path = root / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(f'<html><head></head><body>{body}</body></html>',
+                        encoding='utf-8')
+
+
+GOOD = {
+    'index.html': '<h1 id="top">Top</h1><a href="api/nn.html#deltaconv">'
+                  'DeltaConv</a><a href="https://pyg.org">PyG</a>'
+                  '<script src="_static/mathjax/tex-chtml.js"></script>'
+                  '<pre>tg-intrinsic demo --out DIR</pre>',
+    'api/nn.html': '<dl id="deltaconv"></dl><a href="../index.html#top">'
+                   'up</a><a href="#deltaconv">here</a>',
+    '_static/mathjax/tex-chtml.js': '',
+}
+
+
+def test_check_site_passes_a_good_site(tmp_path):
+    write_site(tmp_path, GOOD)
+    assert check_site().problems(str(tmp_path)) == []
+
+
+@pytest.mark.parametrize('page,body,needle', [
+    ('math.html', '<script src="https://cdn.jsdelivr.net/npm/mathjax@3/'
+     'es5/tex-chtml.js"></script>', 'from another host'),
+    ('style.html', '<link rel="stylesheet" href="//fonts.example.org/a.css">',
+     'from another host'),
+    ('lost.html', '<a href="api/io.html">io</a>', 'reaches no file'),
+    ('anchor.html', '<a href="api/nn.html#DeltaConv.forward">forward</a>',
+     "reaches no element '#DeltaConv.forward'"),
+    ('usage.html', '<p>usage: example.py [\u2013out DIR]</p>',
+     "a typographic dash where '--' belongs"),
+])
+def test_check_site_finds_each_problem(tmp_path, page, body, needle):
+    write_site(tmp_path, {**GOOD, page: body})
+    found = check_site().problems(str(tmp_path))
+    assert len(found) == 1 and found[0].startswith(page) and \
+        needle in found[0], found

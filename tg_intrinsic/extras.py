@@ -26,7 +26,7 @@ EXTRAS = {
                    'the direct-solver peer (CHOLMOD) of '
                    'benchmarks/gravo_applications.py'),
     'docs': (['sphinx>=7.0', 'furo>=2024.1', 'myst-parser>=3.0',
-              'sphinx-gallery>=0.17'],
+              'sphinx-gallery>=0.17', 'sphinx-mathjax-offline>=0.0.2'],
              'the documentation site (make docs)'),
     'test': ([
         'pytest>=7',

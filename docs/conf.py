@@ -59,6 +59,9 @@ autosummary_generate = True
 autodoc_default_options = {'members': True, 'show-inheritance': True}
 autodoc_member_order = 'bysource'
 autodoc_typehints = 'signature'
+# an override without a docstring (MessagePassing.message, ...) is not shown
+# with its parent's text, which describes PyG's method, not this one
+autodoc_inherit_docstrings = False
 napoleon_google_docstring = True
 napoleon_numpy_docstring = False
 napoleon_custom_sections = ['Shapes']
@@ -164,12 +167,25 @@ RESULTS = os.path.join(ROOT, 'benchmarks', 'results')
 
 def headline(result: str, limit: int = 160) -> str:
     """A result's first clause (to its first ';' or sentence end), at most
-    ``limit`` characters, cut between words."""
+    ``limit`` characters, cut between words, with no bracket or bold mark
+    left open by the cut."""
     import re
     first = re.split(r'; |\. (?=[A-Z])', result, maxsplit=1)[0]
-    if len(first) > limit:
-        first = first[:limit].rsplit(' ', 1)[0] + ' ...'
-    return first
+    cut = len(first) > limit
+    if cut:
+        first = first[:limit].rsplit(' ', 1)[0]
+    opened = []
+    for index, character in enumerate(first):
+        if character == '(':
+            opened.append(index)
+        elif character == ')' and opened:
+            opened.pop()
+    if opened:  # cut before the bracket the cut left open
+        first, cut = first[:opened[0]].rstrip(' ,:'), True
+    if first.count('**') % 2:
+        first = first[:first.rindex('**')].rstrip(' ,:')
+        cut = True
+    return first + (' ...' if cut else '')
 
 
 def write_results_pages():
@@ -190,6 +206,9 @@ def write_results_pages():
         pages.setdefault(name, (script, []))[1].append((claim, result))
         summary.append(f'| {claim} | {headline(result)} | '
                        f'{{doc}}`{name} <pages/{name}>` |')
+    # the pages in the table's order, hidden: the table links them
+    summary += ['', '```{toctree}', ':hidden:', '',
+                *(f'pages/{name}' for name in pages), '```']
     texts = {os.path.join('..', 'summary.md'): '\n'.join(summary) + '\n'}
     for name, (script, rows) in pages.items():
         lines = [f'# {rows[0][0]}', '']

@@ -92,6 +92,27 @@ def test_the_version_is_defined_once():
     assert exit_info.value.code == 0
 
 
+
+def test_every_public_forward_says_its_arguments_and_shapes():
+    """A class page shows the class's own members with their own
+    docstrings (an undocumented override shows nothing), so every public
+    module's forward documents its arguments and what it returns."""
+    import torch
+    missing = []
+    for module in modules_with_public_names():
+        for name in module.__all__:
+            obj = getattr(module, name)
+            if not (inspect.isclass(obj) and issubclass(obj, torch.nn.Module)
+                    and 'forward' in vars(obj)):
+                continue
+            doc = inspect.getdoc(vars(obj)['forward']) or ''
+            arguments = len(inspect.signature(obj.forward).parameters) > 1
+            if not doc or (arguments and 'Args:' not in doc) or \
+                    'Returns:' not in doc:
+                missing.append(f'{module.__name__}.{name}.forward')
+    assert not missing, f"forward without Args/Returns: {sorted(set(missing))}"
+
+
 def check_site():
     sys.path.insert(0, DOCS)
     try:

@@ -14,6 +14,8 @@ import threading
 import warnings
 from typing import List, Optional
 
+from tg_intrinsic.errors import interruption_behind
+
 from .common import (ArgumentParser, HelpFormatter, common_options, one_line,
                      user_message)
 
@@ -106,6 +108,17 @@ def main(argv: Optional[List[str]] = None) -> int:
             signal.signal(signum, handler)
 
 
+def _run_stopped(prog: str, stop: KeyboardInterrupt) -> int:
+    """Says that the run was stopped (Ctrl-C, SIGTERM, SIGHUP) and what
+    was kept; the exit code, 128 + the signal's number."""
+    signum = getattr(stop, 'signum', signal.SIGINT)
+    what = 'interrupted' if signum == signal.SIGINT else f'stopped by {stop}'
+    print(f"{prog}: {what}; no file was left half-written and earlier "
+          f"results are as they were (train --resume continues from the "
+          f"last checkpoint)", file=sys.stderr)
+    return 128 + signum
+
+
 def _run(args, prog: str) -> int:
     with warnings.catch_warnings():
         if not args.debug:
@@ -122,17 +135,13 @@ def _run(args, prog: str) -> int:
         except KeyboardInterrupt as stop:
             if args.debug:
                 raise
-            signum = getattr(stop, 'signum', signal.SIGINT)
-            what = 'interrupted' if signum == signal.SIGINT \
-                else f'stopped by {stop}'
-            print(f"{prog}: {what}; no file was left "
-                  f"half-written and earlier results are as they were "
-                  f"(train --resume continues from the last checkpoint)",
-                  file=sys.stderr)
-            return 128 + signum
+            return _run_stopped(prog, stop)
         except Exception as error:  # noqa: BLE001 - reported, not hidden
             if args.debug:
                 raise
+            stop = interruption_behind(error)
+            if stop is not None:  # a signal inside a compiled function
+                return _run_stopped(prog, stop)
             print(f"{prog}: unexpected {type(error).__name__}: "
                   f"{one_line(error)} (rerun with --debug for the traceback "
                   f"and please report it)", file=sys.stderr)

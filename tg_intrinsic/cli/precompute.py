@@ -20,6 +20,8 @@ import time
 import traceback
 from typing import Dict, List, Optional, Tuple
 
+from tg_intrinsic.errors import interruption_behind
+
 from .common import (ArgumentParser, UsageError, common_options, default_of,
                      int_at_least,
                      nonnegative_float, nonnegative_int, one_line,
@@ -256,6 +258,9 @@ def _work(task) -> Tuple[str, Optional[str], Optional[str]]:
     except USER_ERRORS as error:  # a bad file: its message says why
         return source, one_line(error), None
     except Exception as error:  # noqa: BLE001 - reported per file
+        stop = interruption_behind(error)
+        if stop is not None:  # Ctrl-C inside a compiled function
+            raise stop from None
         return (source, f"unexpected {type(error).__name__}: "
                 f"{one_line(error)}", traceback.format_exc())
 

@@ -154,7 +154,10 @@ def test_torch_compile_matches_eager_without_recompiling():
     torch.manual_seed(0)
     batches = [Batch.from_data_list(make_batch(sizes, dtype=torch.float32))
                for sizes in ((200, 260, 230), (150, 180), (220, 240, 210))]
-    check_compiles(DeltaNetClassification(3, 4, k=12), batches)
+    # two narrow layers run the same operations as the default four and
+    # give inductor half the graph to compile (64 s instead of 95 cold)
+    check_compiles(DeltaNetClassification(3, 4, conv_channels=(16, 32), k=12,
+                                          embedding_size=64), batches)
 
 
 def test_bfloat16_autocast():

@@ -147,7 +147,9 @@ def test_torch_compile_with_precomputed_operators():
         for index, item in enumerate(items):
             item.category = torch.tensor([index % 2])
         batches.append(Batch.from_data_list(items))
-    model = DeltaNetSegmentation(3, 5, k=10, num_categories=2)
+    # two narrow layers: the same operations as the default three
+    model = DeltaNetSegmentation(3, 5, conv_channels=(16, 32), k=10,
+                                 embedding_size=64, num_categories=2)
     check_compiles(model, batches, backend='aot_eager')
 
 

@@ -30,7 +30,7 @@ def test_atomic_write_writes_the_whole_file_and_no_temporary(tmp_path):
 
 
 def test_atomic_write_gives_the_usual_permissions(tmp_path):
-    # mkstemp makes 0600 files; the result gets 0666 minus the umask
+    # the result gets 0666 minus the umask, as any new file does
     umask = os.umask(0o022)
     try:
         atomic_write(str(tmp_path / 'a.txt'), lambda f: f.write('x'), 'w')
@@ -75,6 +75,41 @@ def test_the_folder_is_made_or_named(tmp_path):
     with pytest.raises(FileNotFoundError, match='is not a folder'):
         atomic_write(str(tmp_path / 'plain' / 'c.txt'),
                      lambda f: f.write('x'), 'w', make_folder=False)
+
+
+@pytest.mark.parametrize('writer', ['atomic_write', 'atomic_write_file'])
+def test_ctrl_c_just_after_the_temporary_is_made_leaves_none(
+        tmp_path, monkeypatch, writer):
+    # The signal's KeyboardInterrupt is raised at the next bytecode check,
+    # which can be the instant os.open has made the file and not yet
+    # returned its descriptor (CI saw precompute leave a '.tmp-*.pt' so).
+    real_open = os.open
+
+    def open_then_interrupted(*args, **kwargs):
+        real_open(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    path = tmp_path / 'result.txt'
+    path.write_text('old')
+    monkeypatch.setattr(os, 'open', open_then_interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        if writer == 'atomic_write':
+            atomic_write(str(path), lambda f: f.write('new'), 'w')
+        else:
+            atomic_write_file(str(path), lambda name: None)
+    monkeypatch.undo()
+    assert path.read_text() == 'old' and temporaries(tmp_path) == []
+
+
+def test_a_temporary_name_already_taken_is_not_removed(tmp_path,
+                                                        monkeypatch):
+    import secrets
+    taken = tmp_path / f'{TEMPORARY_PREFIX}{"ab" * 8}out.txt'
+    taken.write_text("another process's")
+    monkeypatch.setattr(secrets, 'token_hex', lambda n: 'ab' * n)
+    with pytest.raises(FileExistsError):
+        atomic_write(str(tmp_path / 'out.txt'), lambda f: f.write('x'), 'w')
+    assert taken.read_text() == "another process's"
 
 
 def test_atomic_write_file_hands_a_temporary_with_the_same_extension(

@@ -4,7 +4,7 @@ import io
 import json
 import os
 import platform
-import tempfile
+import secrets
 from typing import Any
 
 import torch
@@ -15,19 +15,30 @@ import torch
 TEMPORARY_PREFIX = '.tmp-'
 
 
-def _temporary_beside(path: str, make_folder: bool):
-    """``(descriptor, name)`` of a new temporary file in ``path``'s folder,
-    which is created when ``make_folder``. A missing folder is named in
-    the error (not the temporary file, which the user never asked for)."""
+def _temporary_beside(path: str, make_folder: bool) -> str:
+    """A new temporary file's name beside ``path`` (the file is not
+    created yet: see :func:`_create`); its folder is created when
+    ``make_folder``."""
     folder = os.path.dirname(os.path.abspath(path))
     if make_folder:
         os.makedirs(folder, exist_ok=True)
+    # the name's end (its extension) tells it apart; all of a long name
+    # would not fit beside the prefix
+    return os.path.join(folder, TEMPORARY_PREFIX + secrets.token_hex(8)
+                        + os.path.basename(path)[-64:])
+
+
+def _create(temporary: str, path: str) -> int:
+    """Creates ``temporary`` (exclusively, with 0666 minus the umask, the
+    permissions of any new file) and returns its descriptor. A missing
+    folder is named in the error (not the temporary file, which the user
+    never asked for)."""
+    flags = (os.O_WRONLY | os.O_CREAT | os.O_EXCL
+             | getattr(os, 'O_NOFOLLOW', 0) | getattr(os, 'O_BINARY', 0))
     try:
-        # the name's end (its extension) tells it apart; all of a long
-        # name would not fit beside the prefix
-        return tempfile.mkstemp(dir=folder, prefix=TEMPORARY_PREFIX,
-                                suffix=os.path.basename(path)[-64:])
+        return os.open(temporary, flags, 0o666)
     except (FileNotFoundError, NotADirectoryError):
+        folder = os.path.dirname(temporary)
         if os.path.isdir(folder):
             raise
         problem = 'is not a folder' if os.path.exists(folder) else \
@@ -36,6 +47,17 @@ def _temporary_beside(path: str, make_folder: bool):
             f"cannot write '{path}': the folder '{folder}' {problem}; "
             f"create it first (e.g. os.makedirs) or write the file "
             f"elsewhere") from None
+
+
+def _discard(temporary: str, error: BaseException):
+    """Removes ``temporary`` after ``error`` stopped a write; not when the
+    error is that the name was taken (the file is someone else's)."""
+    if isinstance(error, FileExistsError) and error.filename == temporary:
+        return
+    try:
+        os.remove(temporary)
+    except (FileNotFoundError, NotADirectoryError):  # never made
+        pass
 
 
 def os_error_reason(error: OSError) -> str:
@@ -51,26 +73,22 @@ def current_umask() -> int:
     return umask
 
 
-def _move_into_place(temporary: str, path: str):
-    # mkstemp creates 0600 files; give the result the usual permissions.
-    os.chmod(temporary, 0o666 & ~current_umask())
-    os.replace(temporary, path)
-
-
 def atomic_write(path: str, write, mode: str, make_folder: bool = True):
     """Calls ``write(f)`` on a temporary file beside ``path`` (opened with
     ``mode``) and renames it onto ``path``: readers see the old file or the
     whole new one, never a part. The folder is created if missing, unless
     ``make_folder=False``: then a missing folder raises a
     :class:`FileNotFoundError` that names it."""
-    fd, tmp = _temporary_beside(path, make_folder)
+    # The name is bound before the file exists, so a Ctrl-C at any point
+    # after (even inside os.open) finds it to remove: with mkstemp, one
+    # landing between the file's creation and the return left it behind.
+    tmp = _temporary_beside(path, make_folder)
     try:
-        with os.fdopen(fd, mode) as f:
+        with os.fdopen(_create(tmp, path), mode) as f:
             write(f)
-        _move_into_place(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+        os.replace(tmp, path)
+    except BaseException as error:
+        _discard(tmp, error)
         raise
 
 
@@ -78,14 +96,13 @@ def atomic_write_file(path: str, write_to, make_folder: bool = True):
     """:func:`atomic_write` for writers that take a file name:
     ``write_to(temporary)`` writes a temporary file beside ``path`` (with
     the same extension) that then replaces ``path``."""
-    fd, tmp = _temporary_beside(path, make_folder)
-    os.close(fd)
+    tmp = _temporary_beside(path, make_folder)
     try:
+        os.close(_create(tmp, path))
         write_to(tmp)
-        _move_into_place(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+        os.replace(tmp, path)
+    except BaseException as error:
+        _discard(tmp, error)
         raise
 
 

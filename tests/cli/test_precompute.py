@@ -148,9 +148,14 @@ def test_resume_skips_finished_files(tmp_path, capsys):
     before = {f: os.stat(f).st_mtime_ns for f in files}
     first = load(out / 'sub' / 'b.pt')
     os.remove(out / 'sub' / 'b.pt')
+    # what a run killed (kill -9) while saving leaves
+    (out / '.tmp-0123456789abcdefa.pt').write_bytes(b'half')
+    (out / 'sub' / '.tmp-0123456789abcdefb.pt').write_bytes(b'half')
     code, stdout, stderr = cli(argv, capsys)
     assert code == 0, stderr
     assert 'for 1 file(s) (skipped 2 already done)' in stdout
+    assert 'removed 2 temporary file(s) of an interrupted write' in stdout
+    assert not list(out.rglob('.tmp-*'))
     for f in files:
         if f.name == 'b.pt':
             same(load(f), first)  # recomputed, the same

@@ -193,7 +193,7 @@ def test_write_into_missing_folder_leaves_nothing(tmp_path):
 
 
 def test_written_files_get_the_usual_permissions(tmp_path):
-    # written through a temporary file (mkstemp makes them 0600)
+    # written through a temporary file, which must not stay private
     path = tmp_path / 'x.hdr'
     write_hdr(path, hdr_image())
     umask = os.umask(0)

@@ -35,7 +35,8 @@ EXAMPLE = """examples:
   tg-intrinsic precompute gravo scans/ cache/gravo --ratio 8 --lower-bound 500
 
 Run "tg-intrinsic precompute KIND --help" for the options of each kind.
-Rerunning the same command resumes: files already written are skipped.
+Rerunning the same command resumes: files already written are skipped,
+and the temporary files (.tmp-*) of a run killed while saving are removed.
 Runs on the CPU, one process per --workers (numba and scipy kernels); the
 saved tensors load onto any device."""
 
@@ -372,13 +373,17 @@ def _own_results(manifest: Optional[Dict]) -> Optional[set]:
 
 def _foreign_files(output: str, manifest: Optional[Dict]) -> List[str]:
     """Files under ``output`` that precompute did not write: all but its
-    manifest, failure list and the results its manifest lists."""
+    manifest, failure list, the results its manifest lists and, beside a
+    manifest, the temporary files of a run killed while saving."""
     from tg_intrinsic.io.results import RECORD, files_under
+    from tg_intrinsic.utils import TEMPORARY_PREFIX
     own = _own_results(manifest)
     return [name for name in files_under(output)
             if name not in (MANIFEST, FAILURES, RECORD) and not (
                 name in own if own is not None else
-                manifest is not None and name.endswith('.pt'))]
+                manifest is not None and name.endswith('.pt'))
+            and not (manifest is not None and os.path.basename(
+                name).startswith(TEMPORARY_PREFIX))]
 
 
 def choose_folder(output: str, manifest: Dict, overwrite: bool,
@@ -517,7 +522,7 @@ def run(args):
 
 def _precompute(args, pairs, folder: bool, start: float) -> int:
     import tg_intrinsic
-    from tg_intrinsic.utils import atomic_write_json
+    from tg_intrinsic.utils import atomic_write_json, remove_temporaries
     settings = settings_of(args)
     write_to = args.output
     if folder:
@@ -542,6 +547,15 @@ def _precompute(args, pairs, folder: bool, start: float) -> int:
     for _, target in todo:
         os.makedirs(os.path.dirname(os.path.abspath(where(target))),
                     exist_ok=True)
+    if folder:  # precompute's own folder, locked: no one else writes there
+        leftovers = [os.path.relpath(os.path.join(place, name), write_to)
+                     for place in sorted({os.path.dirname(where(target))
+                                          for _, target in pairs})
+                     for name in remove_temporaries(place)]
+        if leftovers and not args.quiet:
+            print(f"removed {len(leftovers)} temporary file(s) of an "
+                  f"interrupted write from {write_to}: "
+                  f"{', '.join(leftovers)}")
     tasks = [(args.kind, settings, source, where(target))
              for source, target in todo]
     failures = {}

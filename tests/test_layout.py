@@ -26,6 +26,9 @@ def test_moved_modules_import_from_their_old_path(old):
     new = importlib.import_module(
         f'tg_intrinsic.geometry.{MOVED_MODULES[old]}')
     assert legacy is new
+    # the module keeps its own identity, so its relative imports resolve
+    assert new.__spec__.name == new.__name__
+    assert new.__spec__.parent == new.__package__
     for public in getattr(new, '__all__', []):
         assert getattr(legacy, public) is getattr(new, public)
 

@@ -109,7 +109,9 @@ class _MovedModuleFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
             new = f'{__name__}.{target}'
             warnings.warn(f"'{spec.name}' moved to '{new}'; import it from "
                           f"there", DeprecationWarning, stacklevel=2)
-            return importlib.import_module(new)
+            module = importlib.import_module(new)
+            spec.loader_state = module.__spec__  # see exec_module
+            return module
         parts = [importlib.import_module(name, __name__) if name[0] == '.'
                  else importlib.import_module(f'{__name__}.{name}')
                  for name in target]
@@ -123,7 +125,12 @@ class _MovedModuleFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
         return module
 
     def exec_module(self, module):
-        pass
+        # The import system has just set the moved module's __spec__ to
+        # the old name's; put its own back, or its relative imports would
+        # resolve against the old package (Python 3.12 warns "__package__
+        # != __spec__.parent" at each) and importlib.reload would miss it.
+        if module.__spec__.loader_state is not None:
+            module.__spec__ = module.__spec__.loader_state
 
 
 if not any(isinstance(finder, _MovedModuleFinder) for finder in sys.meta_path):

@@ -555,6 +555,9 @@ def _parse_obj(path: str, with_lines: bool = False):
             body = '\n'.join(row.split('#', 1)[0] for row in face_rows)
         # one number per corner: drop '/vt/vn' and the leading 'f'
         body = re.sub(r'^f', '', re.sub(r'/\S*', '', body), flags=re.M)
+        if re.search(r'[^0-9+\-\s]', body):
+            # (NumPy before 2.3 reads '3.5' as the index 3, with a warning)
+            raise ValueError
         try:  # every face the same polygon (one loop in C)
             index = np.loadtxt(body.split('\n'), dtype=np.int64,
                                comments=None, ndmin=2)

@@ -36,6 +36,7 @@ import torch.nn.functional as F  # noqa: E402
 from torch_geometric.loader import DataLoader  # noqa: E402
 
 from tg_intrinsic import train as training  # noqa: E402
+from tg_intrinsic.devices import autocast  # noqa: E402
 from tg_intrinsic.io.figures import save_figure  # noqa: E402
 from tg_intrinsic.utils import atomic_write_json, machine_info  # noqa: E402
 
@@ -72,7 +73,7 @@ def train_step(model, forward, batch, precision, device, optimizer=None):
     its compiled version) at ``precision``."""
     model.train()
     (optimizer or model).zero_grad()
-    with training.autocast(precision, device):
+    with autocast(precision, device):
         out = forward(batch)
     F.cross_entropy(out.float(), batch.y.view(-1)).backward()
     if optimizer is not None:
@@ -83,7 +84,7 @@ def logits_gap(model, forward, batch, precision, reference, device):
     """The largest difference of the eval-mode logits from ``reference``,
     relative to its largest logit."""
     model.eval()
-    with torch.no_grad(), training.autocast(precision, device):
+    with torch.no_grad(), autocast(precision, device):
         out = forward(batch).float()
     return float((out - reference.float()).abs().max()
                  / reference.abs().max())

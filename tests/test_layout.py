@@ -3,6 +3,7 @@ into another file's private names, and the tests mirror the package file by
 file."""
 import ast
 import importlib
+import importlib.util
 import os
 import sys
 
@@ -206,3 +207,46 @@ def test_no_two_modules_import_each_other():
     both = sorted({tuple(sorted((a, b))) for a, targets in imports.items()
                    for b in targets if a != b and a in imports.get(b, ())})
     assert not both, both
+
+
+SCRIPTS = [os.path.join(folder, name)
+           for folder in ('benchmarks', os.path.join('benchmarks',
+                                                      'report_rows'),
+                          os.path.join('benchmarks', 'replicate'),
+                          'examples')
+           for name in sorted(os.listdir(os.path.join(
+               os.path.dirname(PACKAGE), folder)))
+           if name.endswith('.py')]
+
+
+def test_scripts_use_names_the_package_has():
+    """The benchmarks and examples, which no test runs in full, name only
+    what the package has: ``from tg_intrinsic.x import y`` and
+    ``module.name`` of a module imported so (compile_precision.py kept
+    calling ``tg_intrinsic.train.autocast`` after it moved to
+    ``tg_intrinsic.devices``)."""
+    missing = []
+    for script in SCRIPTS:
+        path = os.path.join(os.path.dirname(PACKAGE), script)
+        tree = ast.parse(open(path).read())
+        modules = {}
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.ImportFrom) or node.level or \
+                    not (node.module or '').startswith('tg_intrinsic'):
+                continue
+            parent = importlib.import_module(node.module)
+            for alias in node.names:
+                if hasattr(parent, '__path__') and importlib.util.find_spec(
+                        f'{node.module}.{alias.name}') is not None:
+                    modules[alias.asname or alias.name] = \
+                        importlib.import_module(f'{node.module}.{alias.name}')
+                elif not hasattr(parent, alias.name):
+                    missing.append(f'{script}:{node.lineno} imports '
+                                   f'{alias.name} from {node.module}')
+        missing += [f'{script}:{node.lineno} uses {node.value.id}.{node.attr}'
+                    for node in ast.walk(tree)
+                    if isinstance(node, ast.Attribute)
+                    and isinstance(node.value, ast.Name)
+                    and node.value.id in modules
+                    and not hasattr(modules[node.value.id], node.attr)]
+    assert SCRIPTS and not missing, '\n'.join(missing)

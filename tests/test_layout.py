@@ -2,6 +2,7 @@
 into another file's private names, and the tests mirror the package file by
 file."""
 import ast
+import glob
 import importlib
 import importlib.util
 import os
@@ -209,14 +210,10 @@ def test_no_two_modules_import_each_other():
     assert not both, both
 
 
-SCRIPTS = [os.path.join(folder, name)
-           for folder in ('benchmarks', os.path.join('benchmarks',
-                                                      'report_rows'),
-                          os.path.join('benchmarks', 'replicate'),
-                          'examples')
-           for name in sorted(os.listdir(os.path.join(
-               os.path.dirname(PACKAGE), folder)))
-           if name.endswith('.py')]
+SCRIPTS = sorted(
+    os.path.relpath(path, os.path.dirname(PACKAGE))
+    for pattern in ('benchmarks/*.py', 'benchmarks/*/*.py', 'examples/*.py')
+    for path in glob.glob(os.path.join(os.path.dirname(PACKAGE), pattern)))
 
 
 def test_scripts_use_names_the_package_has():

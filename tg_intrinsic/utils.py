@@ -79,23 +79,19 @@ def atomic_write(path: str, write, mode: str, make_folder: bool = True):
     whole new one, never a part. The folder is created if missing, unless
     ``make_folder=False``: then a missing folder raises a
     :class:`FileNotFoundError` that names it."""
-    # The name is bound before the file exists, so a Ctrl-C at any point
-    # after (even inside os.open) finds it to remove: with mkstemp, one
-    # landing between the file's creation and the return left it behind.
-    tmp = _temporary_beside(path, make_folder)
-    try:
-        with os.fdopen(_create(tmp, path), mode) as f:
+    def write_to(temporary):
+        with open(temporary, mode) as f:
             write(f)
-        os.replace(tmp, path)
-    except BaseException as error:
-        _discard(tmp, error)
-        raise
+    atomic_write_file(path, write_to, make_folder)
 
 
 def atomic_write_file(path: str, write_to, make_folder: bool = True):
     """:func:`atomic_write` for writers that take a file name:
     ``write_to(temporary)`` writes a temporary file beside ``path`` (with
     the same extension) that then replaces ``path``."""
+    # The name is bound before the file exists, so a Ctrl-C at any point
+    # after (even inside os.open) finds it to remove: with mkstemp, one
+    # landing between the file's creation and the return left it behind.
     tmp = _temporary_beside(path, make_folder)
     try:
         os.close(_create(tmp, path))
@@ -104,6 +100,12 @@ def atomic_write_file(path: str, write_to, make_folder: bool = True):
     except BaseException as error:
         _discard(tmp, error)
         raise
+
+
+def is_temporary(name: str) -> bool:
+    """Whether the file ``name`` (a path or a bare name) is the temporary
+    file of an atomic write."""
+    return os.path.basename(name).startswith(TEMPORARY_PREFIX)
 
 
 def remove_temporaries(folder: str) -> list:
@@ -118,7 +120,7 @@ def remove_temporaries(folder: str) -> list:
         return removed
     for name in names:
         path = os.path.join(folder, name)
-        if name.startswith(TEMPORARY_PREFIX) and os.path.isfile(path):
+        if is_temporary(name) and os.path.isfile(path):
             try:
                 os.remove(path)
             except FileNotFoundError:

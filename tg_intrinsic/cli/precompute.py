@@ -376,14 +376,13 @@ def _foreign_files(output: str, manifest: Optional[Dict]) -> List[str]:
     manifest, failure list, the results its manifest lists and, beside a
     manifest, the temporary files of a run killed while saving."""
     from tg_intrinsic.io.results import RECORD, files_under
-    from tg_intrinsic.utils import TEMPORARY_PREFIX
+    from tg_intrinsic.utils import is_temporary
     own = _own_results(manifest)
     return [name for name in files_under(output)
             if name not in (MANIFEST, FAILURES, RECORD) and not (
                 name in own if own is not None else
                 manifest is not None and name.endswith('.pt'))
-            and not (manifest is not None and os.path.basename(
-                name).startswith(TEMPORARY_PREFIX))]
+            and not (manifest is not None and is_temporary(name))]
 
 
 def choose_folder(output: str, manifest: Dict, overwrite: bool,
